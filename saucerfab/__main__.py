@@ -1,0 +1,3 @@
+from saucerfab.cli import entry
+
+entry()

@@ -1,0 +1,106 @@
+"""The ``saucerfab`` command line: ``main(argv)`` is testable in-process.
+
+Each subcommand lives in its own module ``saucerfab.cli.<name>`` exposing
+
+* ``HELP: str``                      one line for ``saucerfab --help``
+* ``add_arguments(parser) -> None``  its options
+* ``run(args) -> int``               the work; returns the exit code
+
+Modules are imported only when their subcommand runs (``--help`` imports
+each module for its arguments, but never torch), so ``saucerfab check``
+starts without importing torch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from saucerfab import __version__
+from saucerfab.errors import SaucerfabError
+
+#: subcommand name -> module under saucerfab.cli (keep sorted by pipeline order)
+SUBCOMMANDS: dict[str, str] = {
+    "design": "design",
+    "export": "export",
+    "check": "check",
+    "batch": "batch",
+    "printers": "printers",
+    "shapes": "shapes",
+    "scene": "scene",
+}
+
+
+def _available() -> dict[str, object]:
+    mods = {}
+    for name, mod in SUBCOMMANDS.items():
+        try:
+            mods[name] = importlib.import_module(f"saucerfab.cli.{mod}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"saucerfab.cli.{mod}":
+                continue  # not built yet
+            raise
+    return mods
+
+
+def version_text() -> str:
+    """saucerfab, Python and torch versions, and the compute device in use."""
+    import platform
+
+    lines = [f"saucerfab {__version__}", f"Python {platform.python_version()}"]
+    try:
+        import torch
+
+        gpu = torch.cuda.is_available()
+        dev = f"GPU ({torch.cuda.get_device_name(0)})" if gpu else "CPU (no CUDA GPU found)"
+        lines.append(f"torch {torch.__version__}")
+        lines.append(f"device {dev}")
+    except ImportError:
+        lines.append("torch not installed (needed by 'design')")
+    return "\n".join(lines)
+
+
+class _VersionAction(argparse.Action):
+    def __init__(self, option_strings, dest, **kw):  # type: ignore[no-untyped-def]
+        super().__init__(option_strings, dest, nargs=0, help="show versions and the device, then exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):  # type: ignore[no-untyped-def]
+        print(version_text())
+        parser.exit()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="saucerfab",
+        description="Design and fabricate mirror cup and saucer art.",
+    )
+    parser.add_argument("--version", action=_VersionAction)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, mod in _available().items():
+        p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)  # type: ignore[attr-defined]
+        mod.add_arguments(p)  # type: ignore[attr-defined]
+        p.set_defaults(_run=mod.run)  # type: ignore[attr-defined]
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI with ``argv`` (default: ``sys.argv[1:]``); return the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(list(argv) if argv is not None else None)
+    if not getattr(args, "_run", None):
+        parser.print_help()
+        return 0
+    try:
+        return int(args._run(args))
+    except SaucerfabError as exc:
+        print(f"saucerfab {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print(f"saucerfab {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def entry() -> None:  # console script
+    sys.exit(main())

@@ -1,0 +1,45 @@
+"""``saucerfab shapes``: list the built-in base shapes, or render one to PNG/NPY."""
+
+from __future__ import annotations
+
+import argparse
+import io
+
+import numpy as np
+
+HELP = "list built-in base shapes; write one as .npy or 16-bit PNG"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("name", nargs="?", help="shape to write (omit to list)")
+    p.add_argument("--resolution", type=int, default=150, help="vertices per side (default 150)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", help="output .npy (model units) or .png (16-bit, white = 0.1 units)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from saucerfab.errors import ConfigError
+    from saucerfab.fileio import write_bytes_atomic
+    from saucerfab.heightfield import BASE_SHAPES, base_shape
+
+    if not args.name:
+        for name in sorted(BASE_SHAPES):
+            h = base_shape(name, 64, args.seed)
+            print(f"{name:16s} heights {h.min():.3f} .. {h.max():.3f} model units")
+        return 0
+    h = base_shape(args.name, args.resolution, args.seed)
+    if not args.out:
+        raise ConfigError("give --out FILE.npy or FILE.png to write the shape")
+    buf = io.BytesIO()
+    if args.out.lower().endswith(".npy"):
+        np.save(buf, h)
+    elif args.out.lower().endswith(".png"):
+        from PIL import Image
+
+        img = np.clip(np.rint(h[::-1] / 0.1 * 65535), 0, 65535).astype(np.uint16)
+        Image.fromarray(img).save(buf, format="PNG")
+    else:
+        raise ConfigError(f"--out {args.out!r} must end in .npy or .png")
+    write_bytes_atomic(args.out, buf.getvalue())
+    print(f"wrote {args.out}")
+    return 0

@@ -1,0 +1,306 @@
+"""The design folder: what `saucerfab design` writes and `export`/`batch` read.
+
+Layout (schema ``saucerfab.design/1``)::
+
+    DESIGN/
+      design.json        schema, versions, scene, parameters, input hashes, metrics
+      heights.npy        (N, N) float64, final heights h, model units
+      base_heights.npy   (N, N) float64, the base shape z, model units
+      texture.png        (H, W, 3) 8-bit sRGB texture image
+      face_uvs.npy       (F, 3, 2) float32, texture coordinates of each face corner
+      face_view.npy      (F,) uint8, per-face texturing case (FaceView)
+      previews/          PNG previews (optional, for people)
+
+Grid and face order follow :mod:`saucerfab.heightfield` (``triangulate(N)``).
+Texture coordinates follow the OBJ/glTF-independent convention used in all
+of saucerfab: ``u`` from left (0) to right (1) of the texture image, ``v``
+from bottom (0) to top (1), i.e. pixel row ``(1 - v) * H``. UVs are per face
+corner because a vertex shared by a face textured from the direct image and
+one textured from the reflected image has two texture coordinates.
+
+The folder is written atomically (built under a temporary name, renamed).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+from dataclasses import dataclass, field
+from enum import IntEnum
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from saucerfab import __version__
+from saucerfab.errors import DesignError
+from saucerfab.fileio import atomic_dir
+from saucerfab.heightfield import make_grid, triangulate
+from saucerfab.scene import Scene, scene_from_dict, scene_to_dict
+
+SCHEMA = "saucerfab.design/1"
+MAX_TEXTURE_PIXELS = 8192 * 8192
+
+
+class FaceView(IntEnum):
+    """Texturing case of a face (paper, section 3.4.2)."""
+
+    NEITHER = 0
+    DIRECT = 1
+    REFLECTED = 2
+    BOTH = 3
+
+
+@dataclass
+class Design:
+    """A finished (or synthetic) design.
+
+    Attributes:
+        scene: the scene it was designed for.
+        heights: (N, N) float64 final heights, model units.
+        base_heights: (N, N) float64 base shape, model units.
+        texture: (H, W, 3) uint8 sRGB texture image.
+        face_uvs: (F, 3, 2) float32 per-corner texture coordinates in [0, 1].
+        face_view: (F,) uint8 texturing case per face (:class:`FaceView`).
+        parameters: the parameters it was made with (free-form, JSON-able).
+        metrics: per-stage metrics (free-form, JSON-able).
+        inputs: input names and sha256 hashes.
+    """
+
+    scene: Scene
+    heights: np.ndarray
+    base_heights: np.ndarray
+    texture: np.ndarray
+    face_uvs: np.ndarray
+    face_view: np.ndarray
+    parameters: dict[str, Any] = field(default_factory=dict)
+    metrics: dict[str, Any] = field(default_factory=dict)
+    inputs: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return int(self.heights.shape[0])
+
+    def faces(self) -> np.ndarray:
+        return triangulate(self.n)
+
+    def vertices(self) -> np.ndarray:
+        return make_grid(self.scene.saucer).vertices(self.heights)
+
+    def validate(self) -> None:
+        """Raise :class:`DesignError` if arrays disagree with each other or the scene."""
+        n = self.scene.saucer.resolution
+        f = 2 * (n - 1) ** 2
+        checks = [
+            (self.heights.shape == (n, n), f"heights {self.heights.shape} != ({n}, {n})"),
+            (self.base_heights.shape == (n, n), f"base_heights {self.base_heights.shape} != ({n}, {n})"),
+            (self.face_uvs.shape == (f, 3, 2), f"face_uvs {self.face_uvs.shape} != ({f}, 3, 2)"),
+            (self.face_view.shape == (f,), f"face_view {self.face_view.shape} != ({f},)"),
+            (
+                self.texture.ndim == 3 and self.texture.shape[2] == 3 and self.texture.dtype == np.uint8,
+                f"texture must be (H, W, 3) uint8, got {self.texture.shape} {self.texture.dtype}",
+            ),
+            (bool(np.isfinite(self.heights).all()), "heights hold NaN or infinite values"),
+            (bool(np.isfinite(self.face_uvs).all()), "face_uvs hold NaN or infinite values"),
+        ]
+        for ok, msg in checks:
+            if not ok:
+                raise DesignError(f"inconsistent design: {msg}")
+
+
+def sha256_file(path: str | os.PathLike[str]) -> str:
+    """Hex sha256 of a file's bytes (streamed)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _npy_bytes(a: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, a, allow_pickle=False)
+    return buf.getvalue()
+
+
+def _png_bytes(rgb: np.ndarray) -> bytes:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(rgb).save(buf, format="PNG", optimize=False, compress_level=6)
+    return buf.getvalue()
+
+
+def design_json(design: Design) -> dict[str, Any]:
+    """The ``design.json`` content for ``design``."""
+    import platform
+
+    return {
+        "schema": SCHEMA,
+        "saucerfab_version": __version__,
+        "python": platform.python_version(),
+        "scene": scene_to_dict(design.scene),
+        "parameters": design.parameters,
+        "inputs": design.inputs,
+        "metrics": design.metrics,
+        "files": {
+            "heights": "heights.npy",
+            "base_heights": "base_heights.npy",
+            "texture": "texture.png",
+            "face_uvs": "face_uvs.npy",
+            "face_view": "face_view.npy",
+        },
+        "conventions": {
+            "grid": "heights[i, j] at x = xs[j], y = ys[i]; vertex = i * N + j",
+            "faces": "saucerfab.heightfield.triangulate(N), counter-clockwise from +z",
+            "uv": "u left->right, v bottom->top of texture.png",
+        },
+    }
+
+
+def save_design(
+    design: Design,
+    out: str | os.PathLike[str],
+    *,
+    previews: dict[str, bytes] | None = None,
+    extra_files: dict[str, bytes] | None = None,
+) -> Path:
+    """Write ``design`` as a design folder at ``out``, atomically.
+
+    Args:
+        previews: PNG bytes by file name, written under ``previews/``.
+        extra_files: more files by relative name (e.g. an energy log).
+    """
+    design.validate()
+    files = {
+        "heights.npy": _npy_bytes(np.asarray(design.heights, np.float64)),
+        "base_heights.npy": _npy_bytes(np.asarray(design.base_heights, np.float64)),
+        "texture.png": _png_bytes(np.ascontiguousarray(design.texture)),
+        "face_uvs.npy": _npy_bytes(np.asarray(design.face_uvs, np.float32)),
+        "face_view.npy": _npy_bytes(np.asarray(design.face_view, np.uint8)),
+    }
+    for name, data in (previews or {}).items():
+        files[f"previews/{name}"] = data
+    files.update(extra_files or {})
+    meta = design_json(design)
+    meta["file_sha256"] = {k: hashlib.sha256(v).hexdigest() for k, v in sorted(files.items())}
+    files["design.json"] = (json.dumps(meta, indent=2, sort_keys=True) + "\n").encode()
+    with atomic_dir(out) as tmp:
+        for rel, data in files.items():
+            p = tmp / rel
+            p.parent.mkdir(parents=True, exist_ok=True)
+            p.write_bytes(data)
+    return Path(out)
+
+
+def _load_npy(path: Path, max_elems: int) -> np.ndarray:
+    try:
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            shape, _, _ = np.lib.format._read_array_header(fh, version)  # type: ignore[attr-defined]
+        if int(np.prod(shape)) > max_elems:
+            raise DesignError(f"{path} holds {shape}; larger than any design saucerfab makes")
+        return np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise DesignError(f"cannot read {path}: {exc}") from None
+
+
+def load_design(folder: str | os.PathLike[str]) -> Design:
+    """Read and validate a design folder.
+
+    Raises:
+        DesignError: missing folder or file, wrong schema, inconsistent arrays.
+    """
+    folder = Path(folder)
+    meta_path = folder / "design.json"
+    if not meta_path.is_file():
+        raise DesignError(
+            f"{str(folder)!r} is not a design folder (no design.json); "
+            "make one with 'saucerfab design'"
+        )
+    try:
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DesignError(f"cannot read {meta_path}: {exc}") from None
+    if not isinstance(meta, dict) or meta.get("schema") != SCHEMA:
+        got = meta.get("schema") if isinstance(meta, dict) else None
+        raise DesignError(f"{meta_path} has schema {got!r}; this saucerfab reads {SCHEMA!r}")
+    scene = scene_from_dict(meta["scene"])
+    n = scene.saucer.resolution
+    limit = 4 * 2 * n * n * 3 * 2
+    for name in ("heights.npy", "base_heights.npy", "face_uvs.npy", "face_view.npy", "texture.png"):
+        if not (folder / name).is_file():
+            raise DesignError(f"design folder {str(folder)!r} lacks {name}; re-run 'saucerfab design'")
+    from PIL import Image
+
+    try:
+        with Image.open(folder / "texture.png") as im:
+            if im.width * im.height > MAX_TEXTURE_PIXELS:
+                raise DesignError(f"texture.png is {im.width}x{im.height}, over the limit")
+            texture = np.asarray(im.convert("RGB"), dtype=np.uint8)
+    except (OSError, Image.DecompressionBombError) as exc:
+        raise DesignError(f"cannot read {folder / 'texture.png'}: {exc}") from None
+    design = Design(
+        scene=scene,
+        heights=_load_npy(folder / "heights.npy", limit).astype(np.float64),
+        base_heights=_load_npy(folder / "base_heights.npy", limit).astype(np.float64),
+        texture=texture,
+        face_uvs=_load_npy(folder / "face_uvs.npy", limit).astype(np.float32),
+        face_view=_load_npy(folder / "face_view.npy", limit).astype(np.uint8),
+        parameters=meta.get("parameters", {}),
+        metrics=meta.get("metrics", {}),
+        inputs=meta.get("inputs", {}),
+    )
+    design.validate()
+    return design
+
+
+def synthetic_design(
+    scene: Scene | None = None,
+    *,
+    shape: str = "waves",
+    resolution: int = 24,
+    texture_size: int = 64,
+    seed: int = 0,
+) -> Design:
+    """A small design made without optimization, for tests and demos of later stages.
+
+    Heights are the base shape plus a seeded bump field within delta; the
+    texture is a colour checkerboard mapped by planar (x, y) projection, so
+    every face is ``DIRECT`` and a texel's expected colour is easy to compute.
+    """
+    from dataclasses import replace
+
+    from saucerfab.heightfield import base_shape
+
+    scene = scene or Scene()
+    scene = replace(scene, saucer=replace(scene.saucer, resolution=resolution))
+    rng = np.random.default_rng(seed)
+    base = base_shape(shape, resolution, seed)
+    heights = base + rng.uniform(-0.5, 0.5, base.shape) * scene.saucer.delta
+    grid = make_grid(scene.saucer)
+    xy = grid.xy()
+    (x0, x1), (y0, y1) = scene.saucer.x_range, scene.saucer.y_range
+    uv = np.stack([(xy[:, 0] - x0) / (x1 - x0), (xy[:, 1] - y0) / (y1 - y0)], axis=1)
+    faces = triangulate(resolution)
+    ty, tx = np.mgrid[0:texture_size, 0:texture_size]
+    cells = 8
+    cx, cy = tx * cells // texture_size, ty * cells // texture_size
+    palette = np.array(
+        [[230, 57, 70], [29, 53, 87], [241, 250, 238], [69, 123, 157], [255, 183, 3], [42, 157, 143]],
+        dtype=np.uint8,
+    )
+    texture = palette[(cx + 2 * cy) % len(palette)]
+    return Design(
+        scene=scene,
+        heights=heights,
+        base_heights=base,
+        texture=np.ascontiguousarray(texture),
+        face_uvs=uv[faces].astype(np.float32),
+        face_view=np.full(faces.shape[0], FaceView.DIRECT, np.uint8),
+        parameters={"synthetic": True, "shape": shape, "seed": seed},
+        metrics={},
+        inputs={},
+    )

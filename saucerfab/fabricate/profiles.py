@@ -1,0 +1,155 @@
+"""Printer profiles: what a full-colour printer or bureau can make and accepts.
+
+Profiles are TOML files: the ones that ship live in ``printers/`` at the top
+of the project (and are packaged under ``saucerfab/data/printers``); a user's
+own are read from ``$SAUCERFAB_PRINTERS`` (a folder) or given as a path.
+Lengths are millimetres.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from saucerfab.errors import ConfigError
+
+FORMATS = ("3mf", "obj", "glb", "ply", "wrl", "stl")
+
+
+@dataclass(frozen=True)
+class PrinterProfile:
+    """One printer or bureau.
+
+    Attributes:
+        key: short name used on the command line (file stem), e.g. ``j55``.
+        name: human name, e.g. ``Stratasys J55 Prime``.
+        build_volume_mm: (x, y, z) largest part, millimetres.
+        min_wall_mm: thinnest wall the printer makes reliably.
+        min_feature_mm: smallest detail (spike, ridge) it resolves.
+        dpi: colour resolution, dots per inch; sets the texture atlas size.
+        max_texture_px: largest texture edge its software accepts.
+        accepted_formats: export formats its software or the bureau accepts.
+        preferred_format: the one to send when there is a choice.
+        max_triangles: polygon limit (0 = none).
+        max_file_mb: file size limit (0 = none).
+        thin_policy: ``warn`` or ``refuse`` when features are below min_feature_mm.
+        notes: free text.
+    """
+
+    key: str
+    name: str
+    build_volume_mm: tuple[float, float, float]
+    min_wall_mm: float
+    min_feature_mm: float
+    dpi: float
+    max_texture_px: int
+    accepted_formats: tuple[str, ...]
+    preferred_format: str
+    max_triangles: int = 0
+    max_file_mb: float = 0.0
+    thin_policy: str = "warn"
+    notes: str = ""
+
+    def texture_px_for(self, size_mm: float) -> int:
+        """Atlas edge in pixels for a part ``size_mm`` across, at this dpi (power of two, capped)."""
+        want = size_mm / 25.4 * self.dpi
+        px = 256
+        while px < want and px < self.max_texture_px:
+            px *= 2
+        return min(px, self.max_texture_px)
+
+
+def _default_dirs() -> list[Path]:
+    dirs = []
+    env = os.environ.get("SAUCERFAB_PRINTERS")
+    if env:
+        dirs.append(Path(env))
+    here = Path(__file__).resolve()
+    dirs.append(here.parents[2] / "printers")  # source checkout
+    dirs.append(here.parents[1] / "data" / "printers")  # installed package data
+    return dirs
+
+
+def _parse(path: Path) -> PrinterProfile:
+    if path.stat().st_size > 100_000:
+        raise ConfigError(f"printer profile {str(path)!r} is over 100 kB; a profile is a few lines")
+    try:
+        d = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"printer profile {str(path)!r} is not valid TOML: {exc}") from None
+    required = {
+        "name", "build_volume_mm", "min_wall_mm", "min_feature_mm", "dpi",
+        "max_texture_px", "accepted_formats", "preferred_format",
+    }
+    missing = required - set(d)
+    if missing:
+        raise ConfigError(f"printer profile {str(path)!r} lacks {sorted(missing)}")
+    allowed = required | {"max_triangles", "max_file_mb", "thin_policy", "notes"}
+    unknown = set(d) - allowed
+    if unknown:
+        raise ConfigError(f"printer profile {str(path)!r} has unknown key(s) {sorted(unknown)}")
+    try:
+        prof = PrinterProfile(
+            key=path.stem,
+            name=str(d["name"]),
+            build_volume_mm=tuple(float(x) for x in d["build_volume_mm"]),  # type: ignore[arg-type]
+            min_wall_mm=float(d["min_wall_mm"]),
+            min_feature_mm=float(d["min_feature_mm"]),
+            dpi=float(d["dpi"]),
+            max_texture_px=int(d["max_texture_px"]),
+            accepted_formats=tuple(str(f).lower() for f in d["accepted_formats"]),
+            preferred_format=str(d["preferred_format"]).lower(),
+            max_triangles=int(d.get("max_triangles", 0)),
+            max_file_mb=float(d.get("max_file_mb", 0.0)),
+            thin_policy=str(d.get("thin_policy", "warn")),
+            notes=str(d.get("notes", "")),
+        )
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"printer profile {str(path)!r} has a bad value: {exc}") from None
+    bad = [f for f in prof.accepted_formats if f not in FORMATS]
+    if (
+        len(prof.build_volume_mm) != 3
+        or min(prof.build_volume_mm) <= 0
+        or prof.min_wall_mm <= 0
+        or prof.min_feature_mm <= 0
+        or prof.dpi <= 0
+        or prof.max_texture_px < 256
+        or bad
+        or prof.preferred_format not in prof.accepted_formats
+        or prof.thin_policy not in ("warn", "refuse")
+    ):
+        raise ConfigError(
+            f"printer profile {str(path)!r} is inconsistent: build volume must be 3 positive sizes, "
+            f"walls/features/dpi positive, max_texture_px >= 256, formats from {FORMATS} "
+            f"(unknown: {bad}), preferred among accepted, thin_policy warn|refuse"
+        )
+    return prof
+
+
+def list_profiles() -> dict[str, PrinterProfile]:
+    """All profiles found, by key (earlier folders win)."""
+    out: dict[str, PrinterProfile] = {}
+    for d in _default_dirs():
+        if d.is_dir():
+            for p in sorted(d.glob("*.toml")):
+                out.setdefault(p.stem, _parse(p))
+    return out
+
+
+def load_profile(name_or_path: str | os.PathLike[str]) -> PrinterProfile:
+    """A profile by key (``j55``) or by path to a TOML file."""
+    text = os.fspath(name_or_path)
+    if text.endswith(".toml") or os.sep in text:
+        p = Path(text)
+        if not p.is_file():
+            raise ConfigError(f"printer profile file {text!r} not found")
+        return _parse(p)
+    profiles = list_profiles()
+    if text not in profiles:
+        raise ConfigError(
+            f"unknown printer {text!r}; known: {sorted(profiles)} (see 'saucerfab printers'), "
+            "or give a path to your own .toml"
+        )
+    return profiles[text]
