@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from saucerfab import __version__
-from saucerfab.errors import DesignError
+from saucerfab.errors import DesignError, SaucerfabError
 from saucerfab.fileio import atomic_dir
 from saucerfab.heightfield import make_grid, triangulate
 from saucerfab.scene import Scene, scene_from_dict, scene_to_dict
@@ -199,9 +199,17 @@ def _load_npy(path: Path, max_elems: int) -> np.ndarray:
     try:
         with open(path, "rb") as fh:
             version = np.lib.format.read_magic(fh)
-            shape, _, _ = np.lib.format._read_array_header(fh, version)  # type: ignore[attr-defined]
+            # public readers only: numpy 2.x moved the private _read_array_header
+            read = (
+                np.lib.format.read_array_header_1_0
+                if version == (1, 0)
+                else np.lib.format.read_array_header_2_0
+            )
+            shape, _, dtype = read(fh)
         if int(np.prod(shape)) > max_elems:
             raise DesignError(f"{path} holds {shape}; larger than any design saucerfab makes")
+        if dtype.kind not in "biuf":  # the callers convert to float/uint8
+            raise DesignError(f"{path} holds {dtype} values; a design stores numbers")
         return np.load(path, allow_pickle=False)
     except (OSError, ValueError) as exc:
         raise DesignError(f"cannot read {path}: {exc}") from None
@@ -227,7 +235,10 @@ def load_design(folder: str | os.PathLike[str]) -> Design:
     if not isinstance(meta, dict) or meta.get("schema") != SCHEMA:
         got = meta.get("schema") if isinstance(meta, dict) else None
         raise DesignError(f"{meta_path} has schema {got!r}; this saucerfab reads {SCHEMA!r}")
-    scene = scene_from_dict(meta["scene"])
+    try:
+        scene = scene_from_dict(meta["scene"])
+    except (KeyError, SaucerfabError) as exc:  # missing, or a scene that no longer validates
+        raise DesignError(f"{meta_path} has no valid scene: {exc}") from None
     n = scene.saucer.resolution
     limit = 4 * 2 * n * n * 3 * 2
     for name in ("heights.npy", "base_heights.npy", "face_uvs.npy", "face_view.npy", "texture.png"):

@@ -159,7 +159,8 @@ def resample(heights: np.ndarray, n: int) -> np.ndarray:
 def _load_png(path: Path) -> np.ndarray:
     from PIL import Image
 
-    Image.MAX_IMAGE_PIXELS = MAX_SHAPE_PIXELS
+    # Image.open reads only the header, so the size check below runs before
+    # any pixel is decoded (Pillow's global bomb limit is left as it is).
     try:
         with Image.open(path) as im:
             if im.width * im.height > MAX_SHAPE_PIXELS:
@@ -192,7 +193,13 @@ def _load_npy(path: Path) -> np.ndarray:
     try:
         with open(path, "rb") as fh:
             version = np.lib.format.read_magic(fh)
-            shape, _, dtype = np.lib.format._read_array_header(fh, version)  # type: ignore[attr-defined]
+            # public readers only: numpy 2.x moved the private _read_array_header
+            read = (
+                np.lib.format.read_array_header_1_0
+                if version == (1, 0)
+                else np.lib.format.read_array_header_2_0
+            )
+            shape, _, dtype = read(fh)
     except (ValueError, OSError) as exc:
         raise ShapeError(f"{str(path)!r} is not a valid .npy file: {exc}") from None
     if len(shape) != 2:
@@ -293,9 +300,12 @@ def laplacian(n: int):  # -> scipy.sparse.csr_matrix
     unitless in the grid spacing, so E_deform is comparable across
     resolutions in the way the paper's reported values (about 0.2) are.
 
-    On a linear function L is exactly zero everywhere; on f = x^2 in the
-    interior it equals ``-(2/3) dx^2`` (the six neighbours' mean of x^2
-    exceeds x^2 by 4 dx^2 / 6).
+    Rows sum to zero, so L is zero on constants everywhere. On a linear
+    function L is zero at every interior vertex, but not on the border,
+    where the neighbours' mean lies off the vertex (corner (0, 0): at
+    (2/3, 2/3) cells); E_deform applies the same L to z and h, so that is
+    harmless. On f = x^2 in the interior L equals ``-(2/3) dx^2`` (the six
+    neighbours' mean of x^2 exceeds x^2 by 4 dx^2 / 6).
     """
     import scipy.sparse as sp
 

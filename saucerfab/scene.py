@@ -249,7 +249,8 @@ def parse_cup_spec(spec: str) -> Cup:
     if name == "ellipse" and len(nums) in (2, 3):
         return EllipseCup((nums[0], nums[1]), *(nums[2:3]))
     if name == "prism" and 1 <= len(nums) <= 3:
-        if nums[0] != int(nums[0]):
+        # check finiteness first: int() of nan/inf raises ValueError/OverflowError
+        if not math.isfinite(nums[0]) or nums[0] != int(nums[0]):
             raise ConfigError(f"cup spec {spec!r}: the number of prism sides must be whole")
         return PrismCup(int(nums[0]), *nums[1:])
     raise ConfigError(
@@ -434,7 +435,7 @@ def scene_from_dict(d: dict[str, Any], base: Scene | None = None) -> Scene:
         raise ConfigError(f"a scene must be a table, got {type(d).__name__}")
     _check_keys("the scene", d, _TOP_KEYS)
     if "preset" in d:
-        if d["preset"] not in PRESETS:
+        if not isinstance(d["preset"], str) or d["preset"] not in PRESETS:
             raise ConfigError(f"unknown scene preset {d['preset']!r}; known: {sorted(PRESETS)}")
         base = PRESETS[d["preset"]]()
     base = base or paper_scene()
@@ -453,6 +454,8 @@ def scene_from_dict(d: dict[str, Any], base: Scene | None = None) -> Scene:
             _check_keys("[saucer]", d["saucer"], {"x_range", "y_range", "resolution", "delta"})
             kw["saucer"] = replace(base.saucer, **d["saucer"])
         if "cup" in d:
+            if not isinstance(d["cup"], dict):
+                raise ConfigError(f"[cup] must be a table with a 'shape' key, got {d['cup']!r}")
             c = dict(d["cup"])
             shape = c.pop("shape", base.cup.kind)
             classes = {"circle": CircleCup, "ellipse": EllipseCup, "prism": PrismCup}

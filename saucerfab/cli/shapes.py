@@ -21,7 +21,12 @@ def run(args: argparse.Namespace) -> int:
     from saucerfab.errors import ConfigError
     from saucerfab.fileio import write_bytes_atomic
     from saucerfab.heightfield import BASE_SHAPES, base_shape
+    from saucerfab.scene import MAX_GRID, MIN_GRID
 
+    if not MIN_GRID <= args.resolution <= MAX_GRID:
+        raise ConfigError(
+            f"--resolution {args.resolution} is out of range; give {MIN_GRID} to {MAX_GRID} vertices per side"
+        )
     if not args.name:
         for name in sorted(BASE_SHAPES):
             h = base_shape(name, 64, args.seed)

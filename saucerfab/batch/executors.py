@@ -1,0 +1,321 @@
+"""Where jobs run: this process, a local process pool, or a Dask distributed cluster.
+
+Every engine runs the same function, :func:`saucerfab.batch.jobs.execute`, on
+a :class:`~saucerfab.batch.jobs.Payload` that carries the job's input bytes,
+and hands back a :class:`~saucerfab.batch.jobs.JobResult` that carries the
+output bytes; the driver writes the output folders. So a Dask worker needs
+saucerfab installed (the same version as the driver: checked on connect) but
+no shared file system, and a worker that dies writes nothing.
+
+An engine has ``slots`` (how many jobs to keep in flight), ``submit``,
+``wait`` (finished jobs, as results or :data:`WORKER_DIED`), ``events``
+(stage starts reported by workers) and ``close``.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing as mp
+import os
+import queue
+import signal
+import threading
+import time
+import uuid
+from typing import Any
+
+from saucerfab import __version__
+from saucerfab.batch.jobs import JobResult, Payload, execute, set_event_sink
+from saucerfab.errors import ConfigError
+
+#: a job whose worker process died (killed, out of memory) before it answered
+WORKER_DIED = "worker-died"
+
+
+class InProcessEngine:
+    """Runs each job in this process, one at a time (``--workers 0``: debugging, tests)."""
+
+    name = "in-process"
+    slots = 1
+    scratch_in_output = True
+
+    def __init__(self) -> None:
+        self._done: list[tuple[Any, Any]] = []
+        self._events: list[tuple[str, str]] = []
+
+    def submit(self, payload: Payload) -> Any:
+        handle = object()
+        set_event_sink(lambda job, stage: self._events.append((job, stage)))
+        try:
+            self._done.append((handle, execute(payload)))
+        finally:
+            set_event_sink(None)
+        return handle
+
+    def wait(self, handles: list[Any], timeout: float) -> list[tuple[Any, Any]]:
+        done, self._done = self._done, []
+        return done
+
+    def events(self) -> list[tuple[str, str]]:
+        ev, self._events = self._events, []
+        return ev
+
+    def close(self, cancel: bool = False) -> None:
+        pass
+
+
+# --------------------------------------------------------------------------- local pool
+
+
+def _watch_parent(parent: int) -> None:
+    # A pool worker whose driver was killed (kill -9) would otherwise wait for
+    # work forever: leave as soon as the parent is gone.
+    while True:
+        time.sleep(0.5)
+        if os.getppid() != parent:
+            os._exit(0)
+
+
+def _init_pool_worker(events: Any, parent: int, threads: int) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the driver's to handle
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, str(threads))
+    set_event_sink(lambda job, stage: events.put((job, stage)))
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
+
+
+class LocalPoolEngine:
+    """A pool of ``workers`` processes on this machine (spawned, so nothing of the
+    driver's state or threads leaks into them). A worker that dies (killed, out
+    of memory) breaks the pool: its in-flight jobs come back as
+    :data:`WORKER_DIED` and a fresh pool takes the rest."""
+
+    scratch_in_output = True
+
+    def __init__(self, workers: int, threads: int = 1) -> None:
+        if workers < 1:
+            raise ConfigError(f"--workers must be at least 1 for a process pool, got {workers}")
+        self.workers = workers
+        self.threads = threads
+        self.name = f"local process pool, {workers} worker{'s' if workers != 1 else ''}"
+        self._ctx = mp.get_context("spawn")
+        self._events = self._ctx.Queue()
+        self._pool: cf.ProcessPoolExecutor | None = None
+
+    @property
+    def slots(self) -> int:
+        return self.workers
+
+    def _get_pool(self) -> cf.ProcessPoolExecutor:
+        if self._pool is None:
+            self._pool = cf.ProcessPoolExecutor(
+                max_workers=self.workers,
+                mp_context=self._ctx,
+                initializer=_init_pool_worker,
+                initargs=(self._events, os.getpid(), self.threads),
+            )
+        return self._pool
+
+    def submit(self, payload: Payload) -> Any:
+        try:
+            return self._get_pool().submit(execute, payload)
+        except cf.BrokenExecutor:
+            self._discard_pool()
+            return self._get_pool().submit(execute, payload)
+
+    def wait(self, handles: list[Any], timeout: float) -> list[tuple[Any, Any]]:
+        done, _ = cf.wait(handles, timeout=timeout, return_when=cf.FIRST_COMPLETED)
+        out: list[tuple[Any, Any]] = []
+        broken = False
+        for fut in done:
+            try:
+                out.append((fut, fut.result()))
+            except cf.BrokenExecutor:
+                broken = True
+                out.append((fut, WORKER_DIED))
+        if broken:
+            self._discard_pool()
+        return out
+
+    def events(self) -> list[tuple[str, str]]:
+        ev = []
+        while True:
+            try:
+                ev.append(self._events.get_nowait())
+            except (queue.Empty, OSError, ValueError):
+                return ev
+
+    def _discard_pool(self) -> None:
+        if self._pool is not None:
+            self._terminate(self._pool)
+            self._pool = None
+
+    @staticmethod
+    def _terminate(pool: cf.ProcessPoolExecutor) -> None:
+        stop = getattr(pool, "terminate_workers", None)  # Python 3.14+
+        if stop is not None:
+            try:
+                stop()
+            except Exception:  # noqa: BLE001
+                pass
+        else:
+            for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                try:
+                    proc.terminate()
+                except Exception:  # noqa: BLE001
+                    pass
+        pool.shutdown(wait=True, cancel_futures=True)
+
+    def close(self, cancel: bool = False) -> None:
+        if self._pool is None:
+            return
+        if cancel:
+            self._terminate(self._pool)
+        else:
+            self._pool.shutdown(wait=True)
+        self._pool = None
+        self._events.close()
+        self._events.join_thread()
+
+
+# --------------------------------------------------------------------------- Dask
+
+
+def _worker_version() -> str:
+    import saucerfab
+
+    return saucerfab.__version__
+
+
+class DaskEngine:
+    """Jobs as tasks on an existing Dask distributed cluster (``tcp://HOST:PORT``).
+
+    The payload (with the input bytes) is scattered to the cluster and the
+    result (with the output bytes) comes back to this driver, which writes it:
+    workers need saucerfab of the same version, not the driver's files.
+    Stage events travel as worker events (``log_event`` / ``subscribe_topic``).
+    A worker that dies is handled by the scheduler (the task is retried
+    elsewhere up to its ``allowed-failures``); a job it gives up on is
+    recorded as failed.
+    """
+
+    scratch_in_output = False
+
+    def __init__(self, address: str, *, connect_timeout: float = 30.0, threads: int = 1) -> None:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise ConfigError(
+                "--scheduler needs Dask distributed: pip install 'saucerfab[cluster]'"
+            ) from None
+        if "://" not in address:
+            raise ConfigError(f"--scheduler {address!r}: give the scheduler address as tcp://HOST:PORT")
+        self.address = address
+        self.threads = threads
+        self.name = f"Dask cluster {address}"
+        try:
+            self.client = Client(address, timeout=connect_timeout, set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            raise ConfigError(
+                f"cannot reach the Dask scheduler at {address!r} ({exc}); is it running and reachable?"
+            ) from None
+        try:
+            self.client.wait_for_workers(1, timeout=connect_timeout)
+        except (TimeoutError, OSError):
+            self.client.close()
+            raise ConfigError(f"the Dask cluster at {address!r} has no workers") from None
+        versions = self.client.run(_worker_version)
+        wrong = {w: v for w, v in versions.items() if v != __version__}
+        if wrong:
+            self.client.close()
+            raise ConfigError(
+                f"Dask workers run another saucerfab version than this driver ({__version__}): {wrong}; "
+                "install the same version on every worker"
+            )
+        self.topic = f"saucerfab-batch-{uuid.uuid4().hex}"
+        self._events: queue.SimpleQueue[tuple[str, str]] = queue.SimpleQueue()
+        self.client.subscribe_topic(self.topic, self._on_event)
+        self._slots_at = 0.0
+        self._slots = 2
+        self._scattered: dict[Any, Any] = {}
+
+    def _on_event(self, event: Any) -> None:
+        try:
+            _, msg = event
+            self._events.put((str(msg["job"]), str(msg["stage"])))
+        except (TypeError, ValueError, KeyError):
+            pass
+
+    @property
+    def slots(self) -> int:
+        now = time.monotonic()
+        if now - self._slots_at > 5.0:
+            try:
+                self._slots = max(2, 2 * sum(self.client.nthreads().values()))
+            except Exception:  # noqa: BLE001 - keep the last known size
+                pass
+            self._slots_at = now
+        return self._slots
+
+    def submit(self, payload: Payload) -> Any:
+        from saucerfab.batch.jobs import execute as run
+
+        payload.event_topic = self.topic
+        payload.scratch_root = None
+        data = self.client.scatter(payload, hash=False)
+        fut = self.client.submit(run, data, key=f"saucerfab-job-{payload.job_id}-{uuid.uuid4().hex[:8]}", pure=False)
+        self._scattered[fut.key] = data
+        return fut
+
+    def wait(self, handles: list[Any], timeout: float) -> list[tuple[Any, Any]]:
+        from distributed import wait
+
+        try:
+            done, _ = wait(handles, timeout=timeout, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            return []
+        out: list[tuple[Any, Any]] = []
+        for fut in done:
+            self._scattered.pop(fut.key, None)
+            if fut.status == "finished":
+                out.append((fut, fut.result()))
+            elif fut.status == "cancelled":
+                out.append((fut, "the cluster cancelled the task (scheduler restarted or lost it)"))
+            else:
+                exc = fut.exception()
+                name = type(exc).__name__
+                if name == "KilledWorker":
+                    out.append((fut, WORKER_DIED))
+                else:
+                    out.append((fut, f"the task failed on the cluster: {name}: {exc}"))
+            fut.release()
+        return out
+
+    def events(self) -> list[tuple[str, str]]:
+        ev = []
+        while True:
+            try:
+                ev.append(self._events.get_nowait())
+            except queue.Empty:
+                return ev
+
+    def close(self, cancel: bool = False) -> None:
+        try:
+            if cancel:
+                self.client.cancel(list(self._scattered.values()), force=True)
+            self.client.unsubscribe_topic(self.topic)
+        except Exception:  # noqa: BLE001 - closing must not hide the batch's own outcome
+            pass
+        self.client.close()
+
+
+def make_engine(workers: int, scheduler: str | None, threads: int = 1) -> Any:
+    """The engine for ``--workers`` / ``--scheduler``."""
+    if scheduler:
+        return DaskEngine(scheduler, threads=threads)
+    if workers == 0:
+        return InProcessEngine()
+    return LocalPoolEngine(workers, threads=threads)
+
+
+__all__ = ["WORKER_DIED", "DaskEngine", "InProcessEngine", "JobResult", "LocalPoolEngine", "make_engine"]

@@ -1,0 +1,97 @@
+"""The checker's own limits: what it will read, and how much work it will do.
+
+A print bureau runs ``saucerfab check`` on files from strangers, so every
+reader bounds sizes and counts *before* it allocates or decodes anything,
+and every geometric check bounds its work. These limits are the checker's,
+not the printer's: a printer profile's polygon and file-size limits are
+checked separately and give "not printable" findings, while a file over a
+checker limit is refused as unreadable (exit 2) with the limit's name in
+the message, so the user knows which knob to turn.
+
+Defaults suit a 16 GB machine: the largest file the checker accepts needs
+roughly 2-3 GB of memory at peak (10 million triangles are refused; see
+``max_triangles``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+GIB = 1 << 30
+MIB = 1 << 20
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Bounds on input size and on checking work.
+
+    Attributes:
+        max_file_bytes: largest input file read at all (the mesh file itself).
+        max_triangles: most triangles (after fan-triangulating polygons and
+            instancing) the checker processes; above this the file is refused
+            before its triangles are allocated. The default refuses a
+            10-million-face file quickly and clearly.
+        max_vertices: most vertices a file may declare.
+        max_zip_entries: most entries a 3MF archive may list.
+        max_uncompressed_bytes: most bytes extracted from one archive in total
+            (zip bombs are cut off here, whatever the headers claim).
+        max_xml_bytes: largest single XML part read from an archive.
+        max_xml_tree_bytes: largest XML parsed element by element into a
+            tree (memory grows ~10x); the bulk vertex/triangle blocks of
+            usual 3MF files take a streaming fast path and do not count.
+        max_json_bytes: largest glTF JSON document parsed.
+        max_texture_bytes: largest texture file read.
+        max_texture_pixels: most pixels a texture may have; checked from the
+            image header before any pixel is decoded (decompression bombs).
+        max_textures: most distinct textures one file may reference.
+        max_parts: most mesh parts (3MF objects/components/build items, glTF
+            primitive instances, VRML shapes) instanced in total.
+        max_nesting: deepest component/node/VRML nesting followed.
+        thin_wall_samples: surface points whose wall thickness is measured
+            by an inward ray.
+        max_ray_tests: cap on ray-triangle tests in the thin-wall estimate;
+            past it the estimate is marked partial rather than taking longer.
+        max_pair_tests: cap on triangle-pair tests in the self-intersection
+            check; past it the check is marked partial.
+        min_wall_mm: wall thickness to warn under when no printer is given
+            (``None``: only report the estimate).
+        texture_dpi_fraction: warn when the texture's resolution on the
+            model is below this fraction of the printer's dpi.
+        plausible_size_mm: (smallest, largest) plausible largest extent of a
+            model in millimetres; outside it a unit warning is given.
+        uv_tolerance: how far outside [0, 1] a texture coordinate may stray
+            (rounding in exporters) before it counts as outside.
+    """
+
+    max_file_bytes: int = 1 * GIB
+    max_triangles: int = 5_000_000
+    max_vertices: int = 15_000_000
+    max_zip_entries: int = 10_000
+    max_uncompressed_bytes: int = 1 * GIB
+    max_xml_bytes: int = 1 * GIB
+    max_xml_tree_bytes: int = 128 * MIB
+    max_json_bytes: int = 64 * MIB
+    max_texture_bytes: int = 256 * MIB
+    max_texture_pixels: int = 8192 * 8192
+    max_textures: int = 64
+    max_parts: int = 100_000
+    max_nesting: int = 32
+    thin_wall_samples: int = 4096
+    max_ray_tests: int = 40_000_000
+    max_pair_tests: int = 40_000_000
+    min_wall_mm: float | None = None
+    texture_dpi_fraction: float = 0.5
+    plausible_size_mm: tuple[float, float] = (5.0, 5000.0)
+    uv_tolerance: float = 1e-4
+
+    def with_(self, **changes: Any) -> Limits:
+        """A copy with some limits changed (unknown names raise ``TypeError``)."""
+        names = {f.name for f in fields(self)}
+        bad = set(changes) - names
+        if bad:
+            raise TypeError(f"unknown limit(s) {sorted(bad)}; known: {sorted(names)}")
+        return replace(self, **changes)
+
+
+DEFAULT_LIMITS = Limits()

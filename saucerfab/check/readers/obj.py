@@ -1,0 +1,278 @@
+"""Wavefront OBJ reader, with its MTL material library and textures.
+
+Statement lines are counted with ``bytes.count`` before any list of them is
+made, so a file of a billion ``v`` lines is refused by its count, not by
+running out of memory. The common layouts (every ``f`` a triangle with the
+same ``a/b/c`` form, positive indices) are read in bulk with numpy; anything
+else (polygons, negative indices, mixed forms, comments) takes a line-by-line
+path. Polygons are fan-triangulated in order.
+
+Colour: ``map_Kd`` textures through ``vt`` coordinates, ``Kd`` material
+colours, and the common ``v x y z r g b`` vertex-colour extension. The MTL
+file and textures are read only from the OBJ's own folder (no absolute
+paths, no ``..``).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from saucerfab.check.limits import Limits
+from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError
+from saucerfab.check.readers.safe import load_texture_file, resolve_beside
+
+_V = re.compile(rb"^[ \t]*v[ \t]+([^\r\n]*)", re.M)
+_VT = re.compile(rb"^[ \t]*vt[ \t]+([^\r\n]*)", re.M)
+_F_OR_MTL = re.compile(rb"^[ \t]*(f|usemtl)[ \t]+([^\r\n]*)", re.M)
+_MTLLIB = re.compile(rb"^[ \t]*mtllib[ \t]+([^\r\n]*)", re.M)
+_OTHER = re.compile(rb"^[ \t]*(l|p|curv|surf|curv2)[ \t]", re.M)
+_FACE_FORMS = {
+    "v": rb"-?[0-9]+",
+    "v/t": rb"-?[0-9]+/-?[0-9]+",
+    "v/t/n": rb"-?[0-9]+/-?[0-9]+/-?[0-9]+",
+    "v//n": rb"-?[0-9]+//-?[0-9]+",
+}
+MAX_MTL_BYTES = 16 << 20
+
+
+@dataclass
+class _Material:
+    kd: bool = False
+    map_kd: str | None = None
+
+
+def _count_lines(data: bytes, keyword: bytes) -> int:
+    """Lines starting with ``keyword`` + space/tab (an upper bound: leading blanks are rare)."""
+    n = 0
+    for sep in (b" ", b"\t"):
+        n += data.count(b"\n" + keyword + sep) + (1 if data.startswith(keyword + sep) else 0)
+        n += data.count(b"\n " + keyword + sep) + data.count(b"\n\t" + keyword + sep)
+    return n
+
+
+def _floats(payloads: list[bytes], what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of numbers, NaN-padded to the widest, and each row's count."""
+    counts = np.fromiter((p.count(b" ") + p.count(b"\t") + 1 for p in payloads), dtype=np.int64, count=len(payloads))
+    joined = b" ".join(payloads)
+    tokens = joined.split()
+    try:
+        if len(tokens) == int(counts.sum()) and (counts == counts[0]).all():
+            return np.array(tokens, dtype=np.float64).reshape(len(payloads), int(counts[0])), counts
+        rows = [p.split(b"#")[0].split() for p in payloads]
+        width = max((len(r) for r in rows), default=0)
+        out = np.full((len(rows), width), np.nan)
+        counts = np.array([len(r) for r in rows], dtype=np.int64)
+        for i, r in enumerate(rows):
+            if r:
+                out[i, : len(r)] = np.array(r, dtype=np.float64)
+        return out, counts
+    except ValueError:
+        raise ReadError("malformed", f"an OBJ '{what}' line has something that is not a number") from None
+
+
+def read_obj(path: Path, data: bytes, limits: Limits) -> MeshData:
+    """Read an OBJ file's bytes; its MTL and textures are looked up beside ``path``."""
+    b = MeshBuilder("obj", limits)
+    nv, nvt, nf = _count_lines(data, b"v"), _count_lines(data, b"vt"), _count_lines(data, b"f")
+    b.reserve(nv, nf, "the OBJ")
+    if nvt > limits.max_vertices:
+        raise ReadError("over_check_limit", f"the OBJ has {nvt:,} 'vt' lines, over Limits.max_vertices")
+    v_pay = _V.findall(data)
+    vt_pay = _VT.findall(data)
+    fm = _F_OR_MTL.findall(data)
+    if not v_pay and not fm:
+        raise ReadError("not_a_mesh", "no OBJ vertex ('v') or face ('f') statements: not an OBJ mesh")
+    if _OTHER.search(data):
+        b.note("ignored_content", "OBJ points, lines and free-form curves/surfaces were ignored")
+    V, vcounts = _floats(v_pay, "v") if v_pay else (np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
+    if V.shape[1] < 3 or (vcounts < 3).any():
+        raise ReadError("malformed", "an OBJ 'v' line has fewer than 3 coordinates")
+    vcol = None
+    if V.shape[1] >= 6 and (vcounts == 6).all():
+        vcol = V[:, 3:6]
+    UV = _floats(vt_pay, "vt")[0][:, :2] if vt_pay else np.zeros((0, 2))
+    if UV.shape[1] < 2 and len(UV):
+        raise ReadError("malformed", "an OBJ 'vt' line has fewer than 2 coordinates")
+
+    # faces and the material in force for each
+    mat_names: list[bytes] = []
+    face_pay: list[bytes] = []
+    face_mat: list[int] = []
+    cur = -1
+    for tag, pay in fm:
+        if tag == b"usemtl":
+            name = pay.strip()
+            if name not in mat_names:
+                mat_names.append(name)
+            cur = mat_names.index(name)
+        else:
+            face_pay.append(pay)
+            face_mat.append(cur)
+    if not face_pay:
+        raise ReadError("no_triangles", f"the OBJ has {len(V):,} vertices but no faces")
+    fv, ft, fmat = _faces(face_pay, np.array(face_mat, dtype=np.int64), len(V), len(UV), data)
+    b.reserve(len(V), len(fv), "the OBJ")
+    if len(fv) == 0:
+        raise ReadError("no_triangles", "the OBJ's faces have fewer than 3 corners")
+
+    # materials and textures
+    mats = _read_mtls(path, data, limits)
+    m = len(fv)
+    corner_uv = None
+    face_tex = None
+    face_col = np.zeros(m, dtype=bool)
+    if vcol is not None:
+        face_col[:] = True
+        b.colour_kinds.add("vertex")
+    for mi, name in enumerate(mat_names):
+        mat = mats.get(name.decode("utf-8", "replace"))
+        if mat is None:
+            continue
+        sel = fmat == mi
+        if mat.map_kd is not None:
+            has_uv = sel & (ft >= 0).all(axis=1)
+            if has_uv.any():
+                if corner_uv is None:
+                    corner_uv = np.full((m, 3, 2), np.nan)
+                    face_tex = np.full(m, -1, dtype=np.int32)
+                ref = mat.map_kd
+                base = path.parent
+                ti = b.texture(ref, lambda: load_texture_file(base, ref, limits))
+                corner_uv[has_uv] = UV[ft[has_uv]]
+                face_tex[has_uv] = ti  # type: ignore[index]
+                b.colour_kinds.add("texture")
+        elif mat.kd:
+            face_col[sel] = True
+            b.colour_kinds.add("material")
+    b.add(V[:, :3], fv, corner_uv=corner_uv, face_texture=face_tex,
+          face_colour=face_col if face_col.any() else None, what="OBJ")
+    return b.build(units="millimeter (assumed; OBJ has no units)")
+
+
+def _faces(
+    pay: list[bytes], mat: np.ndarray, nv: int, nvt: int, data: bytes
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(triangles (m,3) vertex indices, (m,3) uv indices or -1, (m,) material) from 'f' payloads."""
+    first = pay[0].split()
+    form = None
+    if first:
+        t = first[0]
+        form = "v//n" if b"//" in t else {0: "v", 1: "v/t", 2: "v/t/n"}.get(t.count(b"/"))
+    if form is not None:
+        tok = _FACE_FORMS[form]
+        pat = re.compile(rb"[ \t]*" + tok + rb"[ \t]+" + tok + rb"[ \t]+" + tok + rb"[ \t]*")
+        joined = b"\n".join(pay)
+        full = re.compile(rb"(?:" + pat.pattern + rb"\n)*" + pat.pattern)
+        if full.fullmatch(joined) is not None and b"-" not in joined:
+            k = {"v": 1, "v/t": 2, "v/t/n": 3, "v//n": 2}[form]
+            nums = np.array(joined.replace(b"//", b" ").replace(b"/", b" ").split(), dtype=np.int64)
+            nums = nums.reshape(len(pay), 3, k)
+            fv = nums[:, :, 0] - 1
+            ft = nums[:, :, 1] - 1 if form in ("v/t", "v/t/n") else np.full((len(pay), 3), -1, dtype=np.int64)
+            _check_range(fv, nv, "vertex")
+            if form in ("v/t", "v/t/n"):
+                _check_range(ft, nvt, "texture coordinate")
+            return fv, ft, mat
+    return _faces_slow(data, nv, nvt)
+
+
+def _check_range(idx: np.ndarray, n: int, what: str) -> None:
+    bad = (idx < 0) | (idx >= n)
+    if bad.any():
+        f = int(np.flatnonzero(bad.any(axis=1))[0])
+        raise ReadError(
+            "index_out_of_range",
+            f"OBJ face {f} refers to {what} {int(idx[f][bad[f]][0]) + 1} (1-based) but there are {n:,}",
+            where={"faces": [f]},
+        )
+
+
+_SEQ = re.compile(rb"^[ \t]*(v|vt|f|usemtl)[ \t]+([^\r\n]*)", re.M)
+
+
+def _faces_slow(data: bytes, nv_total: int, nvt_total: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sequential parse: polygons, negative (relative) indices, comments, mixed forms."""
+    fv: list[tuple[int, int, int]] = []
+    ft: list[tuple[int, int, int]] = []
+    fmat: list[int] = []
+    mats: list[bytes] = []
+    cur = -1
+    nv = nvt = 0
+    nface = 0
+    for m in _SEQ.finditer(data):
+        tag, pay = m.group(1), m.group(2)
+        if tag == b"v":
+            nv += 1
+            continue
+        if tag == b"vt":
+            nvt += 1
+            continue
+        if tag == b"usemtl":
+            name = pay.strip()
+            if name not in mats:
+                mats.append(name)
+            cur = mats.index(name)
+            continue
+        corners = pay.split(b"#")[0].split()
+        vi: list[int] = []
+        ti: list[int] = []
+        try:
+            for c in corners:
+                parts = c.split(b"/")
+                a = int(parts[0])
+                a = a - 1 if a > 0 else nv + a  # negative: relative to the vertices so far
+                vi.append(a)
+                if len(parts) > 1 and parts[1]:
+                    t = int(parts[1])
+                    ti.append(t - 1 if t > 0 else nvt + t)
+                else:
+                    ti.append(-1)
+        except ValueError:
+            raise ReadError("malformed", f"OBJ face {nface} has a corner that is not an index: {pay[:60]!r}") from None
+        for k in range(1, len(vi) - 1):
+            fv.append((vi[0], vi[k], vi[k + 1]))
+            ft.append((ti[0], ti[k], ti[k + 1]))
+            fmat.append(cur)
+        nface += 1
+    fva = np.array(fv, dtype=np.int64).reshape(-1, 3)
+    fta = np.array(ft, dtype=np.int64).reshape(-1, 3)
+    _check_range(fva, nv_total, "vertex")
+    has_t = (fta != -1).all(axis=1)
+    if has_t.any():
+        _check_range(fta[has_t], nvt_total, "texture coordinate")
+    fta[~has_t] = -1
+    return fva, fta, np.array(fmat, dtype=np.int64)
+
+
+def _read_mtls(path: Path, data: bytes, limits: Limits) -> dict[str, _Material]:
+    """Materials from every ``mtllib``, read only from beside the OBJ."""
+    mats: dict[str, _Material] = {}
+    for raw in _MTLLIB.findall(data)[:16]:
+        ref = raw.decode("utf-8", "replace").strip()
+        p = resolve_beside(path.parent, ref)
+        if p is None or not p.is_file():
+            # several names on one line, or a missing library: the texture check reports what is missing
+            continue
+        try:
+            if p.stat().st_size > MAX_MTL_BYTES:
+                continue
+            text = p.read_bytes().decode("utf-8", "replace")
+        except OSError:
+            continue
+        cur: _Material | None = None
+        for line in text.splitlines():
+            tok = line.split()
+            if not tok:
+                continue
+            key = tok[0].lower()
+            if key == "newmtl" and len(tok) > 1:
+                cur = mats.setdefault(" ".join(tok[1:]), _Material())
+            elif cur is not None and key == "kd" and len(tok) >= 4:
+                cur.kd = True
+            elif cur is not None and key == "map_kd" and len(tok) > 1:
+                cur.map_kd = tok[-1]  # options (-s, -o...) come first; the file name last
+    return mats

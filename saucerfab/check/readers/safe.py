@@ -1,0 +1,302 @@
+"""Hardened primitives the readers share: bounded files, archives, images, XML, paths.
+
+Each function checks a size or count before the work it bounds:
+
+* :func:`read_file_bounded` - the file size before reading it.
+* :class:`SafeZip` - the end-of-central-directory record (entry count,
+  directory size) before :mod:`zipfile` parses the directory; every entry
+  name (absolute or ``..`` paths refuse the archive); and every extraction,
+  read in chunks against a running uncompressed budget, because the sizes
+  in zip headers are the attacker's to choose.
+* :func:`probe_texture` - the image header's pixel count before decoding.
+* :func:`parse_xml` - defusedxml with DTDs forbidden (so no entity
+  expansion, no external entities), after a size check.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import posixpath
+import struct
+import warnings
+import zipfile
+from pathlib import Path
+from typing import Any
+
+from saucerfab.check.limits import Limits
+from saucerfab.check.meshdata import ReadError, TextureInfo
+
+#: image formats Pillow may decode for a texture; the ones printer software
+#: takes (PNG, JPEG) and a few that OBJ/VRML files in the wild use
+TEXTURE_FORMATS = ("PNG", "JPEG", "BMP", "TGA", "WEBP", "GIF")
+
+
+def read_file_bounded(path: Path, limit: int, what: str = "file") -> bytes:
+    """The bytes of ``path``, refusing (``over_check_limit``) if it is over ``limit``."""
+    try:
+        size = path.stat().st_size
+        if size > limit:
+            raise ReadError("over_check_limit", f"{what} is {size:,} bytes, over the checker's limit of {limit:,}")
+        with open(path, "rb") as fh:
+            data = fh.read(limit + 1)
+    except ReadError:
+        raise
+    except OSError as exc:
+        raise ReadError("file_not_found", f"cannot read {what}: {exc.strerror or exc}") from None
+    if len(data) > limit:  # grew while we read it
+        raise ReadError("over_check_limit", f"{what} is over the checker's limit of {limit:,} bytes")
+    return data
+
+
+def is_unsafe_relpath(name: str) -> bool:
+    """True for a path that is absolute, has a drive, a NUL, or a ``..`` component."""
+    if not name or "\x00" in name:
+        return True
+    n = name.replace("\\", "/")
+    if n.startswith("/") or (len(n) > 1 and n[1] == ":") or n.startswith("//"):
+        return True
+    return any(part == ".." for part in n.split("/"))
+
+
+def resolve_beside(base_dir: Path, ref: str) -> Path | None:
+    """``ref`` (from inside a model file) resolved under ``base_dir``; None if it would escape.
+
+    Model files name their textures and material libraries by relative path;
+    a file from a stranger must not make the checker read ``/etc/shadow`` or
+    ``../../secret.png``, so absolute paths, ``..`` and symlinks leaving the
+    folder are refused.
+    """
+    if is_unsafe_relpath(ref):
+        return None
+    p = (base_dir / ref.replace("\\", "/")).resolve()
+    try:
+        p.relative_to(base_dir.resolve())
+    except ValueError:
+        return None
+    return p
+
+
+# -- archives ---------------------------------------------------------------
+
+_EOCD = b"PK\x05\x06"
+_EOCD64_LOC = b"PK\x06\x07"
+
+
+class SafeZip:
+    """A zip archive opened with its entry count, names and sizes bounded.
+
+    Part names compare case-insensitively (OPC, which 3MF uses, says so).
+    """
+
+    def __init__(self, data: bytes, limits: Limits) -> None:
+        self.limits = limits
+        self.budget = limits.max_uncompressed_bytes
+        self._check_eocd(data)
+        try:
+            self.zf = zipfile.ZipFile(io.BytesIO(data))
+            infos = self.zf.infolist()
+        except zipfile.BadZipFile as exc:
+            raise ReadError("malformed", f"not a valid zip archive: {exc}") from None
+        except (OSError, EOFError, ValueError, NotImplementedError, struct.error) as exc:
+            raise ReadError("truncated", f"the zip archive is damaged: {exc}") from None
+        if len(infos) > limits.max_zip_entries:
+            raise ReadError(
+                "archive_too_large",
+                f"the archive lists {len(infos):,} entries, over the checker's limit of "
+                f"{limits.max_zip_entries:,} (Limits.max_zip_entries)",
+            )
+        self.names: dict[str, zipfile.ZipInfo] = {}
+        declared = 0
+        for info in infos:
+            if is_unsafe_relpath(info.filename):
+                raise ReadError(
+                    "archive_unsafe_path",
+                    f"archive entry {info.filename!r} has an absolute path or '..'; refusing the archive",
+                    where={"entry": info.filename},
+                )
+            self.names[info.filename.lower().lstrip("/")] = info
+            declared += max(0, info.file_size)
+        if declared > limits.max_uncompressed_bytes:
+            # headers can lie low (the bounded reads below catch that), and an
+            # archive honestly this large is over the limit anyway: refuse early
+            raise ReadError(
+                "archive_too_large",
+                f"the archive declares {declared:,} uncompressed bytes, over the checker's limit of "
+                f"{limits.max_uncompressed_bytes:,} (Limits.max_uncompressed_bytes)",
+            )
+
+    def _check_eocd(self, data: bytes) -> None:
+        """Entry count and directory size from the end record, before zipfile parses the directory."""
+        tail_start = max(0, len(data) - (22 + 65535))
+        pos = data.rfind(_EOCD, tail_start)
+        if pos < 0:
+            raise ReadError("truncated", "zip archive without its end record (truncated or not a zip)")
+        rec = data[pos : pos + 22]
+        if len(rec) < 22:
+            raise ReadError("truncated", "zip end record is cut short")
+        _, _, _, _, n_entries, cd_size, cd_offset, _ = struct.unpack("<4s4H2LH", rec)
+        loc = pos - 20
+        if loc >= 0 and data[loc : loc + 4] == _EOCD64_LOC:
+            (off64,) = struct.unpack("<Q", data[loc + 8 : loc + 16])
+            rec64 = data[off64 : off64 + 56] if off64 < len(data) else b""
+            if len(rec64) == 56 and rec64[:4] == b"PK\x06\x06":
+                n_entries, cd_size = struct.unpack("<QQ", rec64[32:48])
+        if n_entries > self.limits.max_zip_entries:
+            raise ReadError(
+                "archive_too_large",
+                f"the archive lists {n_entries:,} entries, over the checker's limit of "
+                f"{self.limits.max_zip_entries:,} (Limits.max_zip_entries)",
+            )
+        if cd_size > len(data):
+            raise ReadError("truncated", "the zip directory is larger than the file (truncated archive)")
+
+    def has(self, name: str) -> bool:
+        return name.lower().lstrip("/") in self.names
+
+    def entry_names(self) -> list[str]:
+        return [i.filename for i in self.names.values()]
+
+    def read(self, name: str, cap: int, what: str = "entry") -> bytes:
+        """Extract one entry, at most ``cap`` bytes and within the archive's total budget."""
+        info = self.names.get(name.lower().lstrip("/"))
+        if info is None:
+            raise ReadError("malformed", f"the archive has no entry {name!r}")
+        limit = min(cap, self.budget)
+        out = bytearray()
+        try:
+            with self.zf.open(info) as fh:
+                while True:
+                    chunk = fh.read(min(1 << 20, limit + 1 - len(out)))
+                    if not chunk:
+                        break
+                    out += chunk
+                    if len(out) > limit:
+                        kind = "archive_too_large"
+                        raise ReadError(
+                            kind,
+                            f"{what} {info.filename!r} inflates past {limit:,} bytes (zip bomb?); limit "
+                            + ("Limits.max_uncompressed_bytes" if limit == self.budget else "for this entry"),
+                            where={"entry": info.filename},
+                        )
+        except ReadError:
+            raise
+        except RuntimeError as exc:  # encrypted entries
+            raise ReadError("unsupported_format", f"{what} {info.filename!r}: {exc}") from None
+        except NotImplementedError as exc:
+            raise ReadError("unsupported_format", f"{what} {info.filename!r}: {exc}") from None
+        except (zipfile.BadZipFile, OSError, EOFError, ValueError, struct.error) as exc:
+            raise ReadError("truncated", f"{what} {info.filename!r} is damaged: {exc}") from None
+        self.budget -= len(out)
+        return bytes(out)
+
+
+# -- XML --------------------------------------------------------------------
+
+
+def parse_xml(data: bytes, what: str, limit: int) -> Any:
+    """An ElementTree root from untrusted ``data``: defusedxml, DTDs forbidden, size bounded."""
+    import defusedxml
+    import defusedxml.ElementTree as DET
+
+    if len(data) > limit:
+        raise ReadError("over_check_limit", f"{what} is {len(data):,} bytes of XML, over the limit of {limit:,}")
+    try:
+        return DET.fromstring(data, forbid_dtd=True, forbid_entities=True, forbid_external=True)
+    except (defusedxml.DTDForbidden, defusedxml.EntitiesForbidden, defusedxml.ExternalReferenceForbidden) as exc:
+        raise ReadError(
+            "xml_forbidden",
+            f"{what} has a DTD or entity declarations ({type(exc).__name__}); 3MF never needs them, refusing",
+        ) from None
+    except DET.ParseError as exc:
+        raise ReadError("malformed", f"{what} is not well-formed XML: {exc}") from None
+    except (ValueError, RecursionError, UnicodeError) as exc:
+        raise ReadError("malformed", f"{what} is not usable XML: {exc}") from None
+
+
+# -- images -----------------------------------------------------------------
+
+
+def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool = True) -> TextureInfo:
+    """Check a texture safely: size in bytes, then pixels from the header, then decode.
+
+    Never raises for a bad image; the returned status says what was wrong.
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    info = TextureInfo(name=name)
+    if data is None:
+        info.status, info.message = "missing", f"texture {name!r} is not there"
+        return info
+    if len(data) > limits.max_texture_bytes:
+        info.status = "too_large"
+        info.message = f"texture {name!r} is {len(data):,} bytes, over the checker's limit of {limits.max_texture_bytes:,}"
+        return info
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # DecompressionBombWarning: we check pixels ourselves below
+            img = Image.open(io.BytesIO(data), formats=TEXTURE_FORMATS)
+            w, h = img.size
+            info.width, info.height, info.image_format = int(w), int(h), img.format
+            if w <= 0 or h <= 0:
+                info.status, info.message = "unreadable", f"texture {name!r} has no pixels ({w} x {h})"
+                return info
+            if w * h > limits.max_texture_pixels:
+                info.status = "too_large"
+                info.message = (
+                    f"texture {name!r} is {w:,} x {h:,} pixels, over the checker's limit of "
+                    f"{limits.max_texture_pixels:,} pixels (decompression bomb?); not decoded"
+                )
+                return info
+            if decode:
+                img.load()
+    except Image.DecompressionBombError as exc:
+        info.status, info.message = "too_large", f"texture {name!r}: {exc}"
+    except UnidentifiedImageError:
+        info.status = "unreadable"
+        info.message = f"texture {name!r} is not an image in a format printers take ({', '.join(TEXTURE_FORMATS)})"
+    except (OSError, SyntaxError, ValueError, EOFError, MemoryError, struct.error, IndexError, TypeError) as exc:
+        info.status, info.message = "unreadable", f"texture {name!r} cannot be decoded: {exc}"
+    return info
+
+
+def load_texture_file(base_dir: Path, ref: str, limits: Limits) -> TextureInfo:
+    """A texture named by a model file on disk (OBJ map_Kd, PLY TextureFile, VRML url)."""
+    p = resolve_beside(base_dir, ref)
+    if p is None:
+        return TextureInfo(
+            name=ref, status="unsafe_path",
+            message=f"texture path {ref!r} is absolute or leaves the model's folder; not read",
+        )
+    if not p.is_file():
+        return TextureInfo(name=ref, status="missing", message=f"texture {ref!r} is not there (looked for {os.fspath(p)!r})")
+    try:
+        size = p.stat().st_size
+        if size > limits.max_texture_bytes:
+            return TextureInfo(
+                name=ref, status="too_large",
+                message=f"texture {ref!r} is {size:,} bytes, over the checker's limit of {limits.max_texture_bytes:,}",
+            )
+        data = p.read_bytes()
+    except OSError as exc:
+        return TextureInfo(name=ref, status="unreadable", message=f"texture {ref!r} cannot be read: {exc.strerror}")
+    return probe_texture(ref, data, limits)
+
+
+def zip_join(base: str, ref: str) -> str | None:
+    """An archive-internal reference resolved against the folder of part ``base``; None if it escapes."""
+    ref = ref.replace("\\", "/")
+    if "\x00" in ref:
+        return None
+    if ref.startswith("/"):
+        joined = ref.lstrip("/")
+    else:
+        joined = posixpath.join(posixpath.dirname(base.lstrip("/")), ref)
+    parts: list[str] = []
+    for part in joined.split("/"):
+        if part in ("", "."):
+            continue
+        if part == "..":
+            return None  # escaping or not, '..' in a package reference is not something 3MF writers emit
+        parts.append(part)
+    return "/".join(parts) if parts else None

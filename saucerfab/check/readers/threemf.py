@@ -1,0 +1,482 @@
+"""3MF reader: core spec plus the materials extension (textures, colour groups).
+
+Our own reader rather than trimesh's, because a bureau's checker must bound
+everything an archive can claim and must see the colour data:
+
+* the zip goes through :class:`~saucerfab.check.readers.safe.SafeZip`
+  (entry count, names, inflation budget);
+* XML goes through defusedxml with DTDs forbidden;
+* ``<vertices>``, ``<triangles>`` and ``<m:texture2dgroup>`` contents - the
+  bulk of any real model - take a fast path: when a block matches a strict
+  grammar (only ``<vertex x= y= z=/>`` elements with plain numeric values,
+  double quotes, XML whitespace; no comments, entities or CDATA), its
+  numbers are read with numpy, and the block is replaced by a marker element
+  before the rest of the document is parsed by defusedxml. A block that
+  matches the grammar means exactly what an XML parser would read from it,
+  so this changes speed, not meaning; anything else takes the ordinary
+  element-by-element path;
+* components and build items are instanced with their transforms, with the
+  nesting depth, part count and instanced triangle count bounded before
+  arrays are made (a small mesh instanced a million times is refused);
+* triangle properties (``pid``, ``p1``-``p3``, object ``pid``/``pindex``)
+  resolve to texture coordinates, colours or base materials, every index
+  range-checked.
+"""
+
+from __future__ import annotations
+
+import re
+import secrets
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from saucerfab.check.limits import Limits
+from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
+from saucerfab.check.readers.safe import SafeZip, parse_xml, probe_texture, zip_join
+
+NS_CORE = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
+NS_MAT = "http://schemas.microsoft.com/3dmanufacturing/material/2015/02"
+NS_PROD = "http://schemas.microsoft.com/3dmanufacturing/production/2015/06"
+NS_RELS = "http://schemas.openxmlformats.org/package/2006/relationships"
+REL_MODEL = "http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"
+
+#: millimetres per 3MF unit
+UNITS_MM = {"micron": 0.001, "millimeter": 1.0, "centimeter": 10.0, "inch": 25.4, "foot": 304.8, "meter": 1000.0}
+
+_C = "{%s}" % NS_CORE
+_M = "{%s}" % NS_MAT
+_P = "{%s}" % NS_PROD
+
+# -- fast path ----------------------------------------------------------------
+
+_WS = rb"[ \t\r\n]"
+_NUM = rb"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?"
+_INT = rb"[0-9]{1,10}"
+_VERT_BLOCK = re.compile(
+    rb"(?:" + _WS + rb"*<vertex" + _WS + rb'+x="' + _NUM + rb'"' + _WS + rb'+y="' + _NUM + rb'"'
+    + _WS + rb'+z="' + _NUM + rb'"' + _WS + rb"*/>)*" + _WS + rb"*"
+)
+_FIRST_TRI = re.compile(rb"<triangle((?:" + _WS + rb'+[a-z0-9]+="[^"<>]*")+)' + _WS + rb"*/>")
+_TRI_ATTR_ORDER = (b"v1", b"v2", b"v3", b"pid", b"p1", b"p2", b"p3")
+_BLOCK_START = re.compile(rb"<(vertices|triangles)>|<([A-Za-z_][A-Za-z0-9_.-]*:)?texture2dgroup(" + _WS + rb'[^<>]*)?(?<!/)>')
+_TRI_BLOCK_CACHE: dict[tuple[bytes, ...], re.Pattern[bytes]] = {}
+
+
+def _tri_block_re(names: tuple[bytes, ...]) -> re.Pattern[bytes]:
+    pat = _TRI_BLOCK_CACHE.get(names)
+    if pat is None:
+        attrs = b"".join(_WS + rb"+" + n + rb'="' + _INT + rb'"' for n in names)
+        pat = re.compile(rb"(?:" + _WS + rb"*<triangle" + attrs + _WS + rb"*/>)*" + _WS + rb"*")
+        _TRI_BLOCK_CACHE[names] = pat
+    return pat
+
+
+def _tex2coord_re(prefix: bytes) -> re.Pattern[bytes]:
+    p = re.escape(prefix)
+    return re.compile(
+        rb"(?:" + _WS + rb"*<" + p + rb"tex2coord" + _WS + rb'+u="' + _NUM + rb'"' + _WS + rb'+v="' + _NUM + rb'"'
+        + _WS + rb"*/>)*" + _WS + rb"*"
+    )
+
+
+@dataclass
+class _Block:
+    kind: str  # vertices | triangles | tex2coord
+    values: Any  # ndarray, or (ndarray tri, tuple names) for triangles
+
+
+def _fast_blocks(data: bytes, marker_ns: str, limits: Limits) -> tuple[bytes, list[_Block]]:
+    """Cut strictly-formed bulk blocks out of ``data``; return the skeleton and the parsed blocks.
+
+    Element counts are bounded before any block's numbers are converted: a
+    part may define objects it never instances, so the instancing caps alone
+    would not bound this allocation.
+    """
+    pieces: list[bytes] = []
+    blocks: list[_Block] = []
+    pos = 0
+    n_vert = n_tri = 0
+    for m in _BLOCK_START.finditer(data):
+        if m.start() < pos:
+            continue
+        start = m.end()
+        if m.group(1) is not None:
+            kind = m.group(1).decode()
+            end = data.find(b"</" + m.group(1) + b">", start)
+        else:
+            kind = "tex2coord"
+            prefix = m.group(2) or b""
+            end = data.find(b"</" + prefix + b"texture2dgroup>", start)
+        if end < 0:
+            continue
+        content = data[start:end]
+        if kind == "vertices":
+            n_vert += content.count(b"<vertex")
+        elif kind == "triangles":
+            n_tri += content.count(b"<triangle")
+        else:
+            n_vert += content.count(b"tex2coord")
+        if n_vert > limits.max_vertices or n_tri > limits.max_triangles:
+            raise ReadError(
+                "over_check_limit",
+                f"the 3MF model lists over {limits.max_vertices:,} vertices/coordinates or "
+                f"{limits.max_triangles:,} triangles, the checker's limits (Limits.max_vertices, "
+                "Limits.max_triangles; --max-triangles raises the latter)",
+            )
+        parsed = _parse_block(kind, content, m.group(2) or b"")
+        if parsed is None:
+            continue
+        pieces.append(data[pos:start])
+        pieces.append(b'<sfblk xmlns="%s" i="%d"/>' % (marker_ns.encode(), len(blocks)))
+        blocks.append(_Block(kind, parsed))
+        pos = end
+    if not blocks:
+        return data, []
+    pieces.append(data[pos:])
+    return b"".join(pieces), blocks
+
+
+def _parse_block(kind: str, content: bytes, prefix: bytes) -> Any:
+    if b"&" in content:
+        return None
+    if kind == "vertices":
+        if _VERT_BLOCK.fullmatch(content) is None:
+            return None
+        vals = content.split(b'"')[1::2]
+        return np.array(vals, dtype=np.float64).reshape(-1, 3)
+    if kind == "tex2coord":
+        if _tex2coord_re(prefix).fullmatch(content) is None:
+            return None
+        vals = content.split(b'"')[1::2]
+        return np.array(vals, dtype=np.float64).reshape(-1, 2)
+    # triangles: the attribute set of the first element, in canonical order, for all
+    first = _FIRST_TRI.search(content)
+    if first is None:
+        return None if content.strip() else (np.zeros((0, 7), dtype=np.int64), _TRI_ATTR_ORDER[:3])
+    names = tuple(re.findall(rb"([a-z0-9]+)=", first.group(1)))
+    it = iter(_TRI_ATTR_ORDER)
+    if names[:3] != _TRI_ATTR_ORDER[:3] or not all(n in it for n in names):  # subsequence, in order
+        return None
+    if _tri_block_re(names).fullmatch(content) is None:
+        return None
+    vals = np.array(content.split(b'"')[1::2], dtype=np.int64).reshape(-1, len(names))
+    return vals, names
+
+
+# -- model structure ------------------------------------------------------------
+
+
+@dataclass
+class _Group:
+    kind: str  # tex | color | base | other
+    size: int
+    coords: np.ndarray | None = None  # (k, 2) for tex
+    texid: int | None = None
+
+
+@dataclass
+class _Part:
+    name: str
+    unit: str
+    objects: dict[int, Any] = field(default_factory=dict)
+    groups: dict[int, _Group] = field(default_factory=dict)
+    textures: dict[int, str] = field(default_factory=dict)  # texture2d id -> archive path
+    items: list[tuple[int, np.ndarray, str | None]] = field(default_factory=list)
+    meshes: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = field(default_factory=dict)
+
+
+def _int_attr(el: Any, name: str, what: str) -> int | None:
+    v = el.get(name)
+    if v is None:
+        return None
+    try:
+        n = int(v)
+    except ValueError:
+        raise ReadError("malformed", f"{what}: attribute {name}={v[:40]!r} is not an integer") from None
+    if n < 0:
+        raise ReadError("index_out_of_range", f"{what}: attribute {name}={n} is negative")
+    return n
+
+
+def _transform(text: str | None, what: str) -> np.ndarray:
+    """3MF's 3x4 row-vector matrix as a 4x4 column-vector transform."""
+    out = np.eye(4)
+    if text is None:
+        return out
+    try:
+        m = np.array(text.split(), dtype=np.float64)
+    except ValueError:
+        raise ReadError("malformed", f"{what}: transform {text[:60]!r} is not 12 numbers") from None
+    if m.shape != (12,):
+        raise ReadError("malformed", f"{what}: transform has {m.size} numbers, needs 12")
+    if not np.isfinite(m).all():
+        raise ReadError("malformed", f"{what}: transform has NaN or infinite entries")
+    out[:3, :3] = m[:9].reshape(3, 3).T
+    out[:3, 3] = m[9:]
+    return out
+
+
+class _Reader:
+    def __init__(self, zf: SafeZip, limits: Limits) -> None:
+        self.zf = zf
+        self.limits = limits
+        self.parts: dict[str, _Part] = {}
+        self.b = MeshBuilder("3mf", limits)
+        self.marker_ns = "urn:saucerfab:check:block:" + secrets.token_hex(8)
+        self.instanced_faces = 0
+
+    # ---- parts
+    def part(self, name: str) -> _Part:
+        key = name.lower()
+        if key in self.parts:
+            return self.parts[key]
+        if len(self.parts) >= 64:
+            raise ReadError("over_check_limit", "the 3MF references more than 64 model parts")
+        if not self.zf.has(name):
+            raise ReadError("malformed", f"the 3MF has no model part {name!r}")
+        raw = self.zf.read(name, self.limits.max_xml_bytes, "model part")
+        skeleton, blocks = _fast_blocks(raw, self.marker_ns, self.limits)
+        root = parse_xml(skeleton, f"model part {name!r}", self.limits.max_xml_tree_bytes)
+        if root.tag != _C + "model":
+            raise ReadError("malformed", f"model part {name!r} has root <{root.tag}>, not a 3MF core <model>")
+        p = _Part(name=name, unit=root.get("unit", "millimeter"))
+        self.parts[key] = p
+        self._index(p, root, blocks)
+        return p
+
+    def _block(self, el: Any, blocks: list[_Block], kind: str) -> Any:
+        """The fast-path block standing in ``el``, if any."""
+        if len(el) == 1 and el[0].tag == "{%s}sfblk" % self.marker_ns:
+            blk = blocks[int(el[0].get("i"))]
+            if blk.kind == kind:
+                return blk.values
+        return None
+
+    def _index(self, p: _Part, root: Any, blocks: list[_Block]) -> None:
+        res = root.find(_C + "resources")
+        if res is not None:
+            for el in res:
+                rid = _int_attr(el, "id", f"<{el.tag.split('}')[-1]}> in {p.name}")
+                if rid is None:
+                    continue
+                if el.tag == _C + "object":
+                    p.objects[rid] = el
+                elif el.tag == _M + "texture2d":
+                    p.textures[rid] = el.get("path") or ""
+                elif el.tag == _M + "texture2dgroup":
+                    coords = self._block(el, blocks, "tex2coord")
+                    if coords is None:
+                        kids = [c for c in el if c.tag == _M + "tex2coord"]
+                        try:
+                            coords = np.array([(c.get("u"), c.get("v")) for c in kids], dtype=np.float64).reshape(-1, 2)
+                        except (TypeError, ValueError):
+                            raise ReadError("malformed", f"texture2dgroup {rid}: a tex2coord lacks a numeric u or v") from None
+                    p.groups[rid] = _Group("tex", len(coords), coords=coords, texid=_int_attr(el, "texid", f"texture2dgroup {rid}"))
+                elif el.tag == _M + "colorgroup":
+                    p.groups[rid] = _Group("color", sum(1 for c in el if c.tag == _M + "color"))
+                elif el.tag == _C + "basematerials":
+                    p.groups[rid] = _Group("base", sum(1 for c in el if c.tag == _C + "base"))
+                elif el.tag in (_M + "compositematerials", _M + "multiproperties"):
+                    p.groups[rid] = _Group("other", len(el))
+                    self.b.note("ignored_content", f"3MF {el.tag.split('}')[-1]} are counted as colour but not checked further")
+        build = root.find(_C + "build")
+        if build is not None:
+            for it in build:
+                if it.tag != _C + "item":
+                    continue
+                oid = _int_attr(it, "objectid", "build item")
+                if oid is None:
+                    raise ReadError("malformed", "a 3MF build item has no objectid")
+                p.items.append((oid, _transform(it.get("transform"), f"build item {oid}"), it.get(_P + "path")))
+        for oid, obj in p.objects.items():
+            mesh = obj.find(_C + "mesh")
+            if mesh is not None:
+                p.meshes[oid] = self._mesh(p, oid, mesh, blocks)
+
+    def _mesh(self, p: _Part, oid: int, mesh: Any, blocks: list[_Block]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        what = f"object {oid} in {p.name}"
+        vel = mesh.find(_C + "vertices")
+        tel = mesh.find(_C + "triangles")
+        V = None if vel is None else self._block(vel, blocks, "vertices")
+        if V is None:
+            kids = [] if vel is None else [c for c in vel if c.tag == _C + "vertex"]
+            self.b.reserve(len(kids), 0, what)
+            try:
+                V = np.array([(c.get("x"), c.get("y"), c.get("z")) for c in kids], dtype=np.float64).reshape(-1, 3)
+            except (TypeError, ValueError):
+                raise ReadError("malformed", f"{what}: a vertex lacks a numeric x, y or z") from None
+        tri = None if tel is None else self._block(tel, blocks, "triangles")
+        if tri is not None:
+            vals, names = tri
+            T = np.full((len(vals), 7), -1, dtype=np.int64)
+            for j, n in enumerate(names):
+                T[:, _TRI_ATTR_ORDER.index(n)] = vals[:, j]
+        else:
+            kids = [] if tel is None else [c for c in tel if c.tag == _C + "triangle"]
+            self.b.reserve(0, len(kids), what)
+            try:
+                T = np.array(
+                    [[c.get(n.decode(), "-1") for n in _TRI_ATTR_ORDER] for c in kids], dtype=np.int64
+                ).reshape(-1, 7)
+            except (TypeError, ValueError, OverflowError):
+                raise ReadError("malformed", f"{what}: a triangle has a non-integer index") from None
+            if (T[:, :3] < 0).any():
+                raise ReadError("malformed", f"{what}: a triangle lacks v1, v2 or v3, or has a negative index")
+        faces = T[:, :3]
+        if len(faces) and (faces.max() >= len(V)):
+            bad = int(np.flatnonzero((faces >= len(V)).any(axis=1))[0])
+            raise ReadError(
+                "index_out_of_range",
+                f"{what}: triangle {bad} uses vertex {int(faces[bad].max())} but the object has {len(V):,} vertices",
+                where={"faces": [bad]},
+            )
+        props = T[:, 3:] if (T[:, 3:] >= 0).any() else None
+        return V, faces, props
+
+    # ---- instancing
+    def instance(self, p: _Part, oid: int, M: np.ndarray, depth: int) -> None:
+        if depth > self.limits.max_nesting:
+            raise ReadError("over_check_limit", f"3MF components nest deeper than {self.limits.max_nesting} (a cycle?)")
+        obj = p.objects.get(oid)
+        if obj is None:
+            raise ReadError("malformed", f"3MF refers to object {oid}, which {p.name} does not define")
+        otype = obj.get("type", "model")
+        if otype == "other":
+            self.b.note("ignored_content", "3MF objects of type 'other' are not printed and were skipped")
+            return
+        if oid in p.meshes:
+            V, F, props = p.meshes[oid]
+            self.b.reserve(len(V), len(F), f"object {oid}")
+            self._emit(p, oid, obj, V, F, props, M)
+            return
+        comps = obj.find(_C + "components")
+        if comps is None:
+            self.b.note("ignored_content", f"3MF object {oid} has neither a mesh nor components (skipped)")
+            return
+        for c in comps:
+            if c.tag != _C + "component":
+                continue
+            cid = _int_attr(c, "objectid", f"component of object {oid}")
+            if cid is None:
+                raise ReadError("malformed", f"a component of object {oid} has no objectid")
+            sub = p
+            path = c.get(_P + "path")
+            if path:
+                target = zip_join("/", path)
+                if target is None:
+                    raise ReadError("archive_unsafe_path", f"component path {path!r} escapes the archive")
+                sub = self.part(target)
+            self.instance(sub, cid, M @ _transform(c.get("transform"), f"component of object {oid}"), depth + 1)
+
+    def _emit(self, p: _Part, oid: int, obj: Any, V: np.ndarray, F: np.ndarray, props: np.ndarray | None, M: np.ndarray) -> None:
+        A, t = M[:3, :3], M[:3, 3]
+        Vw = V @ A.T + t if not np.array_equal(M, np.eye(4)) else V
+        if np.linalg.det(A) < 0:
+            F = F[:, ::-1]  # a mirroring transform turns the winding inside out; undo it
+            props = None if props is None else props[:, [0, 3, 2, 1]]
+        m = len(F)
+        opid = _int_attr(obj, "pid", f"object {oid}")
+        oidx = _int_attr(obj, "pindex", f"object {oid}")
+        pid = np.full(m, -1, dtype=np.int64) if props is None else props[:, 0].copy()
+        pc = np.full((m, 3), -1, dtype=np.int64) if props is None else props[:, 1:].copy()
+        nopid = pid < 0
+        if opid is not None:
+            pid[nopid] = opid
+            pc[nopid] = -1
+        pc[:, 0] = np.where(pc[:, 0] < 0, oidx if oidx is not None else 0, pc[:, 0])
+        pc[:, 1] = np.where(pc[:, 1] < 0, pc[:, 0], pc[:, 1])
+        pc[:, 2] = np.where(pc[:, 2] < 0, pc[:, 0], pc[:, 2])
+        uv = None
+        tex = None
+        col = None
+        for g_id in np.unique(pid):
+            g_id = int(g_id)
+            if g_id < 0:
+                continue
+            sel = pid == g_id
+            grp = p.groups.get(g_id)
+            if grp is None:
+                raise ReadError("malformed", f"object {oid}: property id {g_id} names no texture, colour or material group")
+            idx = pc[sel]
+            if idx.size and idx.max() >= grp.size:
+                raise ReadError(
+                    "index_out_of_range",
+                    f"object {oid}: property index {int(idx.max())} in group {g_id}, which has {grp.size} entries",
+                )
+            if grp.kind == "tex":
+                if uv is None:
+                    uv = np.full((m, 3, 2), np.nan)
+                    tex = np.full(m, -1, dtype=np.int32)
+                assert grp.coords is not None
+                uv[sel] = grp.coords[idx]
+                tex[sel] = self._texture(p, grp.texid, g_id)
+                self.b.colour_kinds.add("texture")
+            else:
+                if col is None:
+                    col = np.zeros(m, dtype=bool)
+                col[sel] = True
+                self.b.colour_kinds.add({"color": "vertex", "base": "material"}.get(grp.kind, "material"))
+        self.b.add(Vw, F, corner_uv=uv, face_texture=tex, face_colour=col, what=f"3MF object {oid}")
+
+    def _texture(self, p: _Part, texid: int | None, gid: int) -> int:
+        if texid is None or texid not in p.textures:
+            return self.b.texture(
+                f"<texture2d {texid}>",
+                lambda: TextureInfo(name=f"texture2d {texid}", status="missing",
+                                    message=f"texture2dgroup {gid} refers to texture2d {texid}, which is not defined"),
+            )
+        path = p.textures[texid]
+
+        def load() -> TextureInfo:
+            target = zip_join(p.name, path) if path else None
+            if target is None:
+                return TextureInfo(name=path, status="unsafe_path" if path else "missing",
+                                   message=f"texture2d {texid} path {path!r} is empty or escapes the archive")
+            if not self.zf.has(target):
+                return TextureInfo(name=path, status="missing", message=f"texture {path!r} is not in the archive")
+            try:
+                data = self.zf.read(target, self.limits.max_texture_bytes, "texture")
+            except ReadError as exc:
+                return TextureInfo(name=path, status="too_large", message=exc.message)
+            return probe_texture(path, data, self.limits)
+
+        return self.b.texture(path.lower(), load)
+
+
+def _start_part(zf: SafeZip, limits: Limits) -> str:
+    """The root model part named by ``_rels/.rels`` (or the usual name if there are no rels)."""
+    if zf.has("_rels/.rels"):
+        root = parse_xml(zf.read("_rels/.rels", 1 << 20, "relationships"), "_rels/.rels", 1 << 20)
+        for rel in root.iter("{%s}Relationship" % NS_RELS):
+            if rel.get("Type", "").rstrip("/").lower() == REL_MODEL.lower():
+                target = zip_join("/", rel.get("Target", ""))
+                if target is None:
+                    raise ReadError("archive_unsafe_path", f"the 3MF start part {rel.get('Target')!r} escapes the archive")
+                return target
+    for name in zf.entry_names():
+        if name.lower().endswith(".model"):
+            return name
+    raise ReadError("malformed", "the archive has no 3MF model part (is it a 3MF at all?)")
+
+
+def read_3mf(data: bytes, limits: Limits) -> MeshData:
+    """Read a 3MF package from its bytes."""
+    zf = SafeZip(data, limits)
+    r = _Reader(zf, limits)
+    root = r.part(_start_part(zf, limits))
+    unit = root.unit
+    if unit not in UNITS_MM:
+        raise ReadError("malformed", f"3MF unit {unit[:40]!r} is not one of {sorted(UNITS_MM)}")
+    if not root.items:
+        raise ReadError("no_triangles", "the 3MF build has no items: nothing would be printed")
+    for oid, M, path in root.items:
+        p = root
+        if path:
+            target = zip_join("/", path)
+            if target is None:
+                raise ReadError("archive_unsafe_path", f"build item path {path!r} escapes the archive")
+            p = r.part(target)
+        r.instance(p, oid, M, 0)
+    return r.b.build(unit_mm=UNITS_MM[unit], units=unit, units_stated=True)

@@ -1,0 +1,122 @@
+"""Fabrication options: base, cup seat, atlas and colour settings.
+
+All lengths are millimetres in the physical print (after the model frame has
+been scaled by ``Scene.mm_per_unit``). The defaults make a part that the
+J55-class printers build as it is: a 3 mm plate under the cup's standing
+plane, at least 2 mm of material under the saucer's lowest point, and a
+1.5 mm deep recess that holds the real cup exactly where the design assumes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any, Literal
+
+from saucerfab.errors import ConfigError
+
+SeatKind = Literal["recess", "ring", "none"]
+SEAT_KINDS: tuple[str, ...] = ("recess", "ring", "none")
+
+#: texture atlas edges we accept (a power of two keeps mipmaps exact)
+MIN_TEXTURE_PX, MAX_TEXTURE_PX = 64, 16384
+
+
+def _pos(name: str, v: float, *, zero_ok: bool = False) -> None:
+    if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+        raise ConfigError(f"{name} must be a finite number, got {v!r}")
+    if v < 0 or (v == 0 and not zero_ok):
+        raise ConfigError(f"{name} must be {'non-negative' if zero_ok else 'positive'}, got {v!r}")
+
+
+@dataclass(frozen=True)
+class FabOptions:
+    """How to turn a design into a printable, coloured solid.
+
+    Attributes:
+        base_thickness_mm: plate thickness below the cup's standing plane
+            (model z = 0); the flat bottom of the whole part lies at least
+            this far below it.
+        min_thickness_mm: material left under the saucer's lowest point; the
+            bottom is lowered further when the saucer dips below z = 0.
+        seat: ``recess`` (default): a plate reaches under the cup and holds a
+            shallow pocket of the cup's footprint whose floor is exactly the
+            cup's standing plane; ``ring``: the plate's top is that plane and
+            a low ring surrounds the cup; ``none``: no plate (the cup then
+            stands on a support as high as the part's base, reported).
+        seat_depth_mm: depth of the recess, or height of the ring.
+        seat_clearance_mm: gap between the cup's footprint and the recess
+            wall (or the ring's inside), so a real cup drops in.
+        seat_rim_mm: width of plate material around the recess (ring width).
+        texture_px: atlas edge in pixels; ``None`` = the printer profile's
+            resolution for the part's size (``PrinterProfile.texture_px_for``).
+        padding_px: gutter around each atlas region filled by edge dilation,
+            so bilinear filtering and mipmaps never reach background.
+        wall_rgb: sRGB 8-bit colour of walls, base and seat (a neutral).
+        inpaint: ``harmonic`` fills faces no viewer sees (``FaceView.NEITHER``)
+            with a smooth (harmonic) continuation of their neighbours'
+            colours; ``none`` leaves them at ``wall_rgb``.
+        obj_zip: write OBJ + MTL + PNG as one ``.zip`` (what bureaus ask for)
+            instead of three loose files.
+        name: file stem of the written files (``saucer.3mf`` ...).
+        coord_decimals: decimals of millimetre coordinates in text formats
+            (5: 10 nm, far below any printer's resolution).
+    """
+
+    base_thickness_mm: float = 3.0
+    min_thickness_mm: float = 2.0
+    seat: SeatKind = "recess"
+    seat_depth_mm: float = 1.5
+    seat_clearance_mm: float = 0.5
+    seat_rim_mm: float = 4.0
+    texture_px: int | None = None
+    padding_px: int = 8
+    wall_rgb: tuple[int, int, int] = (200, 200, 200)
+    inpaint: Literal["harmonic", "none"] = "harmonic"
+    obj_zip: bool = False
+    name: str = "saucer"
+    coord_decimals: int = 5
+
+    def __post_init__(self) -> None:
+        _pos("base_thickness_mm", self.base_thickness_mm)
+        _pos("min_thickness_mm", self.min_thickness_mm)
+        if self.seat not in SEAT_KINDS:
+            raise ConfigError(f"seat must be one of {SEAT_KINDS}, got {self.seat!r}")
+        _pos("seat_depth_mm", self.seat_depth_mm)
+        _pos("seat_clearance_mm", self.seat_clearance_mm, zero_ok=True)
+        _pos("seat_rim_mm", self.seat_rim_mm)
+        if self.texture_px is not None:
+            tp = self.texture_px
+            if (
+                not isinstance(tp, int)
+                or isinstance(tp, bool)
+                or not MIN_TEXTURE_PX <= tp <= MAX_TEXTURE_PX
+                or tp & (tp - 1)
+            ):
+                raise ConfigError(
+                    f"texture_px must be a power of two in [{MIN_TEXTURE_PX}, {MAX_TEXTURE_PX}], got {tp!r}"
+                )
+        if not isinstance(self.padding_px, int) or not 1 <= self.padding_px <= 64:
+            raise ConfigError(f"padding_px must be an integer in [1, 64], got {self.padding_px!r}")
+        rgb = tuple(self.wall_rgb)
+        if len(rgb) != 3 or not all(isinstance(c, int) and 0 <= c <= 255 for c in rgb):
+            raise ConfigError(f"wall_rgb must be three integers in [0, 255], got {self.wall_rgb!r}")
+        object.__setattr__(self, "wall_rgb", rgb)
+        if self.inpaint not in ("harmonic", "none"):
+            raise ConfigError(f"inpaint must be 'harmonic' or 'none', got {self.inpaint!r}")
+        if (
+            not isinstance(self.name, str)
+            or not self.name
+            or not all(c.isalnum() or c in "-_" for c in self.name)
+        ):
+            raise ConfigError(
+                f"name must be a plain file stem (letters, digits, '-', '_'), got {self.name!r}"
+            )
+        if not isinstance(self.coord_decimals, int) or not 3 <= self.coord_decimals <= 9:
+            raise ConfigError(f"coord_decimals must be an integer in [3, 9], got {self.coord_decimals!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (JSON-ready)."""
+        d = asdict(self)
+        d["wall_rgb"] = list(self.wall_rgb)
+        return d

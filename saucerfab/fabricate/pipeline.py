@@ -1,0 +1,297 @@
+"""Design folder -> print-ready files: the one entry point of the fabrication stage.
+
+``export_design`` scales the design to millimetres (the user's cup diameter
+overrides the scene's), builds the watertight solid with its cup seat
+(:mod:`.solid`), lays out the UV atlas (:mod:`.atlas`), bakes the texture
+(:mod:`.bake`), runs the requested exporters (:mod:`.registry`) and writes
+the files with ``scene.json`` and an ``export.json`` summary into one folder,
+atomically. Everything is checked before the folder is written, so bad
+input never leaves a half-written folder.
+
+Reproducible: the same design and options give byte-identical files (no
+dates or random names in any file; fixed zip entry dates; canonical mesh
+order). Timings are returned, never written.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from saucerfab import __version__
+from saucerfab.design import Design, load_design
+from saucerfab.errors import ConfigError, DesignError, ExportError
+from saucerfab.fabricate.options import FabOptions
+from saucerfab.fabricate.profiles import PrinterProfile, load_profile
+
+Progress = Callable[[str, float], None]
+
+#: relative weight of each step for the progress fraction (measured at 150x150 / 4096 px)
+_STEPS = {"load": 0.02, "solid": 0.05, "atlas": 0.03, "bake": 0.3, "encode": 0.15, "write": 0.45}
+
+
+@dataclass
+class ExportResult:
+    """What ``export_design`` wrote.
+
+    Attributes:
+        out: the output folder.
+        printer: profile key.
+        formats: formats written, in order.
+        files: format -> paths of its files (e.g. ``obj``: .obj, .mtl, .png).
+        scene_json: path of ``scene.json``.
+        summary_json: path of ``export.json``.
+        triangles: triangles of the solid.
+        vertices: vertices of the solid (shared positions).
+        volume_mm3: enclosed volume, mm^3.
+        bbox_mm: (x, y, z) size of the part, mm.
+        texture_px: atlas edge, pixels.
+        cup_diameter_mm: the physical cup width used.
+        mm_per_unit: millimetres per model unit.
+        file_bytes: file name -> size in bytes.
+        unseen_fraction: share of the top's texels no viewer sees (inpainted).
+        warnings: thin walls/features (under ``warn``), seat notes.
+        timings: step -> seconds (not written to any file).
+    """
+
+    out: Path
+    printer: str
+    formats: list[str]
+    files: dict[str, list[Path]]
+    scene_json: Path
+    summary_json: Path
+    triangles: int
+    vertices: int
+    volume_mm3: float
+    bbox_mm: tuple[float, float, float]
+    texture_px: int
+    cup_diameter_mm: float
+    mm_per_unit: float
+    file_bytes: dict[str, int] = field(default_factory=dict)
+    unseen_fraction: float = 0.0
+    warnings: list[str] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (JSON-ready), paths as strings."""
+        return {
+            "out": str(self.out),
+            "printer": self.printer,
+            "formats": list(self.formats),
+            "files": {k: [str(p) for p in v] for k, v in self.files.items()},
+            "scene_json": str(self.scene_json),
+            "summary_json": str(self.summary_json),
+            "triangles": self.triangles,
+            "vertices": self.vertices,
+            "volume_mm3": self.volume_mm3,
+            "bbox_mm": list(self.bbox_mm),
+            "texture_px": self.texture_px,
+            "cup_diameter_mm": self.cup_diameter_mm,
+            "mm_per_unit": self.mm_per_unit,
+            "file_bytes": dict(self.file_bytes),
+            "unseen_fraction": self.unseen_fraction,
+            "warnings": list(self.warnings),
+            "timings": dict(self.timings),
+        }
+
+
+def _resolve_design(design: Design | str | os.PathLike[str]) -> Design:
+    if isinstance(design, Design):
+        design.validate()
+        return design
+    path = Path(design)
+    if not path.is_dir():
+        raise DesignError(f"design folder {str(path)!r} not found; make one with 'saucerfab design'")
+    return load_design(path)
+
+
+def _resolve_cup(design: Design, cup_diameter_mm: float | None) -> Design:
+    if cup_diameter_mm is None:
+        return design
+    v = cup_diameter_mm
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise ConfigError(f"cup diameter must be a positive number of millimetres, got {v!r}")
+    from dataclasses import replace
+
+    return replace(design, scene=design.scene.with_changes(cup_diameter_mm=float(v)))
+
+
+def _fits(bbox: tuple[float, float, float], volume: tuple[float, float, float]) -> bool:
+    """Whether a part fits the build volume, turned about z as needed (z stays up)."""
+    (a, b), (p, q) = sorted(bbox[:2]), sorted(volume[:2])
+    return a <= p and b <= q and bbox[2] <= volume[2]
+
+
+def export_design(
+    design: Design | str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    printer: str | PrinterProfile = "j55",
+    cup_diameter_mm: float | None = None,
+    formats: Sequence[str] | None = None,
+    options: FabOptions | None = None,
+    progress: Progress | None = None,
+) -> ExportResult:
+    """Export a design as print-ready files for ``printer``.
+
+    Args:
+        design: a :class:`Design` or a design folder.
+        out: output folder (created, or replaced if it is a previous export).
+        printer: profile key (``j55``), path to a profile TOML, or a profile.
+        cup_diameter_mm: the real cup's width (circle: diameter; ellipse: 2a;
+            prism: 2 x circumradius), mm; None keeps the scene's.
+        formats: formats to write (``3mf``, ``obj``, ``glb``, ``ply``,
+            ``wrl``, ``stl``); None: the profile's preferred format.
+        options: solid, seat and texture settings.
+        progress: called with (step name, overall fraction in [0, 1]).
+
+    Returns:
+        An :class:`ExportResult`.
+
+    Raises:
+        DesignError: missing or broken design folder.
+        ConfigError: bad cup diameter or options, unknown printer.
+        ExportError: unknown or unaccepted format, part larger than the
+            build volume, over the printer's triangle or file size limit,
+            unusable output folder.
+        MeshError: the solid cannot be built, or is too thin for a
+            ``refuse`` profile.
+    """
+    from saucerfab.fabricate import registry
+
+    timings: dict[str, float] = {}
+    done = 0.0
+
+    def step(name: str, t0: float, weight: float | None = None) -> float:
+        """Record a finished step's time and report progress; returns a new start time."""
+        nonlocal done
+        timings[name] = time.perf_counter() - t0
+        done += _STEPS.get(name, 0.0) if weight is None else weight
+        if progress is not None:
+            progress(name, min(done, 1.0))
+        return time.perf_counter()
+
+    t = time.perf_counter()
+    opts = options or FabOptions()
+    profile = printer if isinstance(printer, PrinterProfile) else load_profile(printer)
+    fmts = registry.normalize_formats(
+        [profile.preferred_format] if formats is None else list(formats), profile.accepted_formats, profile.name
+    )
+    if opts.texture_px is not None and opts.texture_px > profile.max_texture_px:
+        raise ExportError(
+            f"texture_px {opts.texture_px} exceeds what {profile.name} accepts ({profile.max_texture_px} px)"
+        )
+    dsg = _resolve_cup(_resolve_design(design), cup_diameter_mm)
+    scene = dsg.scene
+    t = step("load", t)
+
+    from saucerfab.fabricate.atlas import TOP_SHARE, build_uvmap, layout_page
+    from saucerfab.fabricate.bake import bake_page, png_bytes, vertex_colors
+    from saucerfab.fabricate.scene_json import scene_json_bytes
+    from saucerfab.fabricate.solid import build_solid
+    from saucerfab.fabricate.textured import TexturedMesh
+
+    solid = build_solid(dsg, scene.mm_per_unit, opts, profile)
+    bbox = solid.bbox_mm
+    if not _fits(bbox, profile.build_volume_mm):
+        vol = " x ".join(f"{v:g}" for v in profile.build_volume_mm)
+        raise ExportError(
+            f"the part is {bbox[0]:.1f} x {bbox[1]:.1f} x {bbox[2]:.1f} mm, larger than "
+            f"{profile.name}'s build volume {vol} mm; use a smaller --cup-diameter-mm"
+        )
+    ntri = int(solid.faces.shape[0])
+    if profile.max_triangles and ntri > profile.max_triangles:
+        raise ExportError(f"the part has {ntri} triangles; {profile.name} takes at most {profile.max_triangles}")
+    t = step("solid", t)
+
+    (x0, x1), (y0, y1) = solid.footprint
+    size_px = opts.texture_px or profile.texture_px_for(max(x1 - x0, y1 - y0) / TOP_SHARE)
+    layout = layout_page(size_px, opts.padding_px, solid.grid_x, solid.grid_y, solid.heights)
+    uvmap = build_uvmap(solid, layout)
+    t = step("atlas", t)
+
+    page, bake_stats = bake_page(dsg, layout, wall_rgb=opts.wall_rgb, inpaint=opts.inpaint)
+    vrgb = vertex_colors(solid, uvmap, page, layout, opts.wall_rgb)
+    t = step("bake", t)
+    png = png_bytes(page)
+    t = step("encode", t)
+
+    mesh = TexturedMesh(
+        name=opts.name,
+        vertices=solid.vertices,
+        faces=solid.faces,
+        uvs=uvmap.uvs,
+        face_uvs=uvmap.face_uvs,
+        texture_png=png,
+        texture_px=size_px,
+        vertex_rgb=vrgb,
+        decimals=opts.coord_decimals,
+    )
+    per_format: dict[str, dict[str, bytes]] = {}
+    for fmt in fmts:
+        per_format[fmt] = registry.render(mesh, fmt, opts)
+        t = step(f"format:{fmt}", t, _STEPS["write"] * 0.8 / len(fmts))
+
+    if profile.max_file_mb:
+        for files in per_format.values():
+            for name, data in files.items():
+                if len(data) > profile.max_file_mb * 1e6:
+                    raise ExportError(
+                        f"{name} is {len(data) / 1e6:.1f} MB; {profile.name} takes at most "
+                        f"{profile.max_file_mb:g} MB (lower --texture-px)"
+                    )
+
+    scene_bytes = scene_json_bytes(scene, solid)
+    all_files = registry.merge_files(per_format, {"scene.json": scene_bytes})
+    summary = {
+        "schema": "saucerfab.export/1",
+        "saucerfab_version": __version__,
+        "printer": {"key": profile.key, "name": profile.name},
+        "formats": fmts,
+        "cup_diameter_mm": scene.cup_diameter_mm,
+        "mm_per_unit": scene.mm_per_unit,
+        "triangles": ntri,
+        "vertices": int(solid.vertices.shape[0]),
+        "volume_mm3": round(solid.volume_mm3, 3),
+        "bbox_mm": [round(b, 5) for b in bbox],
+        "texture_px": size_px,
+        "unseen_fraction": round(bake_stats["unseen_fraction"], 6),
+        "seat": {"kind": solid.seat.kind, "floor_z_mm": round(solid.seat.floor_z, 6)},
+        "options": opts.to_dict(),
+        "warnings": list(solid.warnings),
+        "files": {
+            name: {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+            for name, data in sorted(all_files.items())
+        },
+        "design": {"inputs": dsg.inputs, "parameters": dsg.parameters},
+    }
+    all_files["export.json"] = (json.dumps(summary, indent=2, sort_keys=True, default=str) + "\n").encode()
+    out_path = registry.write_folder(out, all_files)
+    step("write", t, _STEPS["write"] * 0.2)
+
+    return ExportResult(
+        out=out_path,
+        printer=profile.key,
+        formats=fmts,
+        files={fmt: [out_path / name for name in files] for fmt, files in per_format.items()},
+        scene_json=out_path / "scene.json",
+        summary_json=out_path / "export.json",
+        triangles=ntri,
+        vertices=int(solid.vertices.shape[0]),
+        volume_mm3=solid.volume_mm3,
+        bbox_mm=bbox,
+        texture_px=size_px,
+        cup_diameter_mm=scene.cup_diameter_mm,
+        mm_per_unit=scene.mm_per_unit,
+        file_bytes={name: len(data) for name, data in all_files.items()},
+        unseen_fraction=bake_stats["unseen_fraction"],
+        warnings=list(solid.warnings),
+        timings=timings,
+    )

@@ -1,0 +1,130 @@
+"""The exporters by format, and the one place that writes the output folder.
+
+Each writer is a pure function ``(TexturedMesh, FabOptions) -> {file name: bytes}``.
+:func:`write_folder` writes all of them, plus ``scene.json`` and
+``export.json``, as one folder via :func:`saucerfab.fileio.atomic_dir`: the
+folder appears complete or not at all.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from saucerfab.errors import ExportError
+from saucerfab.fabricate.options import FabOptions
+from saucerfab.fabricate.textured import TexturedMesh
+from saucerfab.fileio import atomic_dir
+
+
+@dataclass(frozen=True)
+class Writer:
+    """One export format.
+
+    Attributes:
+        format: key used on the command line and in printer profiles.
+        module: module under ``saucerfab.fabricate`` holding the writer.
+        function: its writer function name.
+        description: one line for help texts.
+        mesh_suffix: suffix of the file that holds the mesh (what the checker reads).
+    """
+
+    format: str
+    module: str
+    function: str
+    description: str
+    mesh_suffix: str
+
+    def load(self) -> Callable[..., dict[str, bytes]]:
+        mod = importlib.import_module(f"saucerfab.fabricate.{self.module}")
+        return getattr(mod, self.function)
+
+
+WRITERS: dict[str, Writer] = {
+    "3mf": Writer("3mf", "export_3mf", "write_3mf", "3MF with texture (Materials extension)", ".3mf"),
+    "obj": Writer("obj", "export_obj", "write_obj", "OBJ + MTL + PNG (or one zip)", ".obj"),
+    "glb": Writer("glb", "export_glb", "write_glb", "binary glTF 2.0, metres, PBR", ".glb"),
+    "ply": Writer("ply", "export_ply", "write_ply", "PLY, per-vertex colour", ".ply"),
+    "wrl": Writer("wrl", "export_vrml", "write_vrml", "VRML 2.0 + PNG", ".wrl"),
+    "stl": Writer("stl", "export_stl", "write_stl", "binary STL, no colour", ".stl"),
+}
+
+
+def normalize_formats(formats: Sequence[str], accepted: Sequence[str], printer_name: str) -> list[str]:
+    """Lower-cased, de-duplicated formats in the given order, each known and accepted.
+
+    Raises:
+        ExportError: an unknown format, or one the printer does not accept.
+    """
+    out: list[str] = []
+    for f in formats:
+        key = str(f).strip().lower().lstrip(".")
+        if key == "vrml":
+            key = "wrl"
+        if key not in WRITERS:
+            raise ExportError(f"unknown export format {f!r}; known: {', '.join(WRITERS)}")
+        if key not in accepted:
+            raise ExportError(
+                f"{printer_name} does not accept {key!r}; it accepts {', '.join(accepted)} "
+                "(see 'saucerfab printers')"
+            )
+        if key not in out:
+            out.append(key)
+    if not out:
+        raise ExportError("no export format given; name at least one, e.g. --formats 3mf")
+    return out
+
+
+def render(mesh: TexturedMesh, fmt: str, options: FabOptions) -> dict[str, bytes]:
+    """The files of one format, in memory."""
+    w = WRITERS[fmt].load()
+    if fmt == "obj":
+        return w(mesh, zipped=options.obj_zip)
+    return w(mesh)
+
+
+def merge_files(per_format: Mapping[str, Mapping[str, bytes]], extra: Mapping[str, bytes]) -> dict[str, bytes]:
+    """All files of all formats in one name -> bytes map.
+
+    Formats may share a file (OBJ and VRML both put the atlas PNG beside
+    them); a shared name must then hold the same bytes.
+    """
+    files: dict[str, bytes] = {}
+    for group in (*per_format.values(), extra):
+        for name, data in group.items():
+            if name in files and files[name] != data:
+                raise ExportError(f"internal error: two exporters write different {name!r}")
+            files[name] = data
+    return files
+
+
+def write_folder(out: str | os.PathLike[str], files: Mapping[str, bytes]) -> Path:
+    """Write ``files`` (flat names) as the folder ``out``, atomically.
+
+    An existing ``out`` is replaced only if it is empty or a previous export
+    (it holds ``export.json``), so a typo cannot wipe an unrelated folder.
+
+    Raises:
+        ExportError: ``out`` is a file, or a non-empty folder that is not an export.
+    """
+    path = Path(out)
+    if path.exists():
+        if not path.is_dir():
+            raise ExportError(f"output {str(path)!r} exists and is not a folder; choose another --out")
+        if any(path.iterdir()) and not (path / "export.json").is_file():
+            raise ExportError(
+                f"output folder {str(path)!r} is not empty and is not a saucerfab export; "
+                "choose a new or empty folder"
+            )
+    try:
+        with atomic_dir(path) as tmp:
+            for name, data in files.items():
+                if "/" in name or "\\" in name or name.startswith("."):
+                    raise ExportError(f"internal error: bad output file name {name!r}")
+                (tmp / name).write_bytes(data)
+    except OSError as exc:
+        raise ExportError(f"cannot write {str(path)!r}: {exc}") from None
+    return path

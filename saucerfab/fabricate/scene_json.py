@@ -1,0 +1,106 @@
+"""``scene.json``: the viewing geometry in the coordinates of the written files.
+
+Schema ``saucerfab.scene/1`` (all lengths millimetres, file frame: the
+coordinates of the 3MF/OBJ/PLY/VRML/STL files; the GLB's POSITION data holds
+the same numbers in metres)::
+
+    {"schema": "saucerfab.scene/1", "units": "mm",
+     "camera": {"position": [x, y, z], "up": [0, 0, 1]},
+     "views": {"direct":    {"target": [x, y, z], "viewing_angle_deg": a, "width": w, "height": h},
+               "reflected": {...}},
+     "cup": {"shape": "circle", "center": [x, y], "bottom_z": z, "height": h, "radius": r}
+            | {"shape": "ellipse", ..., "semi_axes": [a, b], "rotation_deg": t}
+            | {"shape": "prism", ..., "sides": n, "circumradius": r, "rotation_deg": t},
+     "model_to_file": [[s, 0, 0, tx], [0, s, 0, ty], [0, 0, s, tz], [0, 0, 0, 1]]}
+
+``viewing_angle_deg`` is SoftRas's: tan(angle) = half the frame's width /
+depth along the view axis; ``width`` and ``height`` are the view image's
+size in pixels (each input image covers its whole, square frame). The
+model-to-file map is a uniform scale (mm per model unit) and a translation
+into the positive octant, so angles and the up vector are unchanged.
+
+Beyond those fields: ``mm_per_unit``, the saucer's footprint and the cup
+seat in file coordinates, and the GLB's node transform.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+
+from saucerfab.fabricate.export_glb import Z_UP_TO_Y_UP
+from saucerfab.fabricate.solid import Solid
+from saucerfab.scene import CircleCup, EllipseCup, Scene
+
+SCHEMA = "saucerfab.scene/1"
+
+#: decimals of millimetre values in scene.json (10 nm)
+DECIMALS = 6
+
+
+def _r(x: float) -> float:
+    return round(float(x), DECIMALS) + 0.0
+
+
+def _pt(m: np.ndarray, p: tuple[float, ...]) -> list[float]:
+    q = m @ np.array([*p, 1.0])
+    return [_r(c) for c in q[:3]]
+
+
+def scene_dict(scene: Scene, solid: Solid) -> dict[str, Any]:
+    """The ``scene.json`` content for ``scene`` as written with ``solid``'s transform."""
+    m = solid.model_to_file
+    s = float(m[0, 0])
+    cup = scene.cup
+    centre = _pt(m, (0.0, 0.0, 0.0))
+    cup_d: dict[str, Any] = {
+        "shape": cup.kind,
+        "center": centre[:2],
+        "bottom_z": centre[2],
+        "height": _r(cup.height * s),
+    }
+    if isinstance(cup, CircleCup):
+        cup_d["radius"] = _r(cup.radius * s)
+    elif isinstance(cup, EllipseCup):
+        cup_d["semi_axes"] = [_r(cup.semi_axes[0] * s), _r(cup.semi_axes[1] * s)]
+        cup_d["rotation_deg"] = float(cup.rotation_deg)
+    else:
+        cup_d["sides"] = int(cup.sides)
+        cup_d["circumradius"] = _r(cup.circumradius * s)
+        cup_d["rotation_deg"] = float(cup.rotation_deg)
+
+    def view(name: str) -> dict[str, Any]:
+        v = getattr(scene, name)
+        return {
+            "target": _pt(m, v.target),
+            "viewing_angle_deg": float(v.viewing_angle_deg),
+            "width": int(v.image_size),
+            "height": int(v.image_size),
+        }
+
+    (x0, x1), (y0, y1) = solid.footprint
+    seat = solid.seat
+    return {
+        "schema": SCHEMA,
+        "units": "mm",
+        "camera": {"position": _pt(m, scene.camera), "up": [0.0, 0.0, 1.0]},
+        "views": {"direct": view("direct"), "reflected": view("reflected")},
+        "cup": cup_d,
+        "model_to_file": [[_r(c) for c in row] for row in m.tolist()],
+        "mm_per_unit": _r(s),
+        "saucer": {"x_range": [_r(x0), _r(x1)], "y_range": [_r(y0), _r(y1)]},
+        "seat": {
+            "kind": seat.kind,
+            "floor_z": _r(seat.floor_z),
+            "top_z": _r(seat.top_z),
+            "base_z": _r(solid.bottom_z),
+        },
+        "glb": {"units": "m", "scale_from_mm": 0.001, "node_matrix_column_major": Z_UP_TO_Y_UP},
+    }
+
+
+def scene_json_bytes(scene: Scene, solid: Solid) -> bytes:
+    """``scene.json`` as UTF-8 bytes (sorted keys off: the schema's order reads best)."""
+    return (json.dumps(scene_dict(scene, solid), indent=2) + "\n").encode("utf-8")

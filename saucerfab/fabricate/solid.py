@@ -1,0 +1,470 @@
+"""The printable solid: the heightfield closed into a watertight part with a cup seat.
+
+Frames. The design lives in model units (origin at the cup's bottom centre,
+z up). Here everything is first scaled to millimetres by
+``Scene.mm_per_unit`` (the "model-mm" frame: same origin and axes), then
+translated into the positive octant (the *file* frame every exporter writes,
+and ``scene.json`` describes): ``file = model * mm_per_unit + t`` with ``t``
+chosen so the part's bounding box starts at (0, 0, 0). ``Solid.model_to_file``
+is that 4x4 affine map.
+
+Construction, all with manifold3d so the result is a guaranteed oriented
+2-manifold:
+
+* the *saucer block*: the N x N top grid (heights in mm), four vertical
+  walls down to a flat bottom at ``z_bottom``, and that bottom; built as an
+  explicit mesh (faces ids: one per top triangle, one per wall, one for the
+  bottom, so manifold's simplification never merges top triangles).
+* the *cup seat* (``FabOptions.seat``): a plate whose outline is the convex
+  hull of the cup's footprint (grown by clearance + rim) and the saucer's
+  footprint, minus that footprint, so it meets the block face to face and
+  never covers the saucer's top. ``recess``: the plate top is
+  ``seat_depth_mm`` above the cup's standing plane and a pocket of the cup's
+  footprint grown by the clearance is cut down to exactly that plane (model
+  z = 0). ``ring``: the plate top is the standing plane and a ring rises
+  around the pocket.
+* union, difference; then manifold's status must be ``NoError`` *and* the
+  volume positive (an inverted mesh also reports NoError).
+
+Vertices and faces are then put in a canonical order (sorted positions,
+rotated and sorted faces) so the same design always gives the same bytes,
+whatever order manifold's parallel kernels emit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from saucerfab.design import Design
+from saucerfab.errors import MeshError
+from saucerfab.fabricate.options import FabOptions
+from saucerfab.fabricate.profiles import PrinterProfile
+from saucerfab.heightfield import make_grid, triangulate
+
+#: manifold's merge tolerance, mm: far below printer resolution, far above
+#: the 10 nm rounding of written coordinates, so no two distinct vertices
+#: can round onto one position
+MERGE_TOLERANCE_MM = 1e-4
+
+
+@dataclass(frozen=True)
+class SeatInfo:
+    """Where the cup stands, in file coordinates (mm).
+
+    Attributes:
+        kind: ``recess``, ``ring`` or ``none``.
+        center_xy: (2,) the cup axis.
+        floor_z: z of the cup's standing plane (model z = 0).
+        top_z: z of the plate top around the recess (recess), of the ring
+            top (ring), or ``floor_z`` (none).
+        pocket: (K, 2) outline of the recess / ring inside (cup footprint
+            grown by the clearance), counter-clockwise; empty for ``none``.
+    """
+
+    kind: str
+    center_xy: tuple[float, float]
+    floor_z: float
+    top_z: float
+    pocket: np.ndarray
+
+
+@dataclass(frozen=True)
+class FeatureReport:
+    """Crests (spikes, ridges) of the top thinner than the printer makes.
+
+    Attributes:
+        count: number of thin crest vertices.
+        min_width_mm: width at half prominence of the thinnest crest
+            (``inf`` when there is no crest at all).
+        worst_xy_mm: model-mm (x, y) of the thinnest crest, or None.
+    """
+
+    count: int
+    min_width_mm: float
+    worst_xy_mm: tuple[float, float] | None
+
+
+@dataclass(frozen=True)
+class Solid:
+    """A closed, outward-oriented triangle mesh in file coordinates.
+
+    Attributes:
+        vertices: (V, 3) float64 positions, mm, file frame, rounded to the
+            options' decimals; all >= 0 (positive octant).
+        faces: (F, 3) int64 vertex indices, counter-clockwise from outside.
+        is_top: (F,) bool, the face lies on the saucer's top heightfield.
+        model_to_file: (4, 4) affine map from model units to file mm.
+        grid_x: (N,) file x of the design grid's columns, mm.
+        grid_y: (N,) file y of the design grid's rows, mm.
+        heights: (N, N) file z of the top grid vertices, mm.
+        bottom_z: file z of the flat bottom (0).
+        volume_mm3: enclosed volume, mm^3 (> 0).
+        seat: where the cup stands.
+        features: thin crest report.
+        warnings: human-readable warnings (thin walls/features under ``warn``).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    is_top: np.ndarray
+    model_to_file: np.ndarray
+    grid_x: np.ndarray
+    grid_y: np.ndarray
+    heights: np.ndarray
+    bottom_z: float
+    volume_mm3: float
+    seat: SeatInfo
+    features: FeatureReport
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def bbox_mm(self) -> tuple[float, float, float]:
+        """Size (x, y, z) of the axis-aligned bounding box, mm."""
+        ext = self.vertices.max(axis=0) - self.vertices.min(axis=0)
+        return (float(ext[0]), float(ext[1]), float(ext[2]))
+
+    @property
+    def footprint(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """((x0, x1), (y0, y1)) of the saucer's top in file mm."""
+        return (
+            (float(self.grid_x[0]), float(self.grid_x[-1])),
+            (float(self.grid_y[0]), float(self.grid_y[-1])),
+        )
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def crest_widths(heights_mm: np.ndarray, dx_mm: float, dy_mm: float, min_height_mm: float) -> np.ndarray:
+    """Width at half prominence of each crest vertex, mm; ``inf`` where none.
+
+    A vertex is a crest along a mesh line (x, y or the cell diagonal) when it
+    rises at least ``min_height_mm`` above both neighbours on that line (a
+    lower crest is below what a printer resolves anyway). With the faces
+    linear, the crest's cross-section at half its prominence
+    ``p = h - max(h_a, h_b)`` reaches ``L * (p/2) / (h - h_n)`` towards each
+    neighbour ``n`` at distance ``L``; the width is the sum of both sides and
+    the result is the smallest over the three lines. A symmetric single-vertex
+    spike is one grid spacing wide at half height.
+
+    Args:
+        heights_mm: (N, N) heights in mm, rows along y.
+        dx_mm, dy_mm: grid spacing along x (columns) and y (rows), mm.
+        min_height_mm: prominence below which a crest is ignored.
+
+    Returns:
+        (N, N) float64 widths in mm (``inf`` for non-crests and the border).
+    """
+    h = np.asarray(heights_mm, np.float64)
+    width = np.full(h.shape, np.inf)
+    c = h[1:-1, 1:-1]
+    lines = (
+        (h[1:-1, :-2], h[1:-1, 2:], dx_mm),  # along x
+        (h[:-2, 1:-1], h[2:, 1:-1], dy_mm),  # along y
+        (h[:-2, :-2], h[2:, 2:], math.hypot(dx_mm, dy_mm)),  # the triangulation's diagonal
+    )
+    inner = width[1:-1, 1:-1]
+    for a, b, length in lines:
+        p = c - np.maximum(a, b)
+        crest = p >= min_height_mm
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = length * 0.5 * p * (1.0 / (c - a) + 1.0 / (c - b))
+        inner[...] = np.where(crest, np.minimum(inner, w), inner)
+    return width
+
+
+def check_features(
+    heights_mm: np.ndarray, xs_mm: np.ndarray, ys_mm: np.ndarray, min_feature_mm: float
+) -> FeatureReport:
+    """Crests thinner than ``min_feature_mm`` (and at least that tall)."""
+    dx = float(xs_mm[1] - xs_mm[0])
+    dy = float(ys_mm[1] - ys_mm[0])
+    w = crest_widths(heights_mm, dx, dy, min_feature_mm)
+    thin = w < min_feature_mm
+    if not np.isfinite(w).any():
+        return FeatureReport(0, math.inf, None)
+    i, j = np.unravel_index(int(np.argmin(w)), w.shape)
+    return FeatureReport(int(thin.sum()), float(w[i, j]), (float(xs_mm[j]), float(ys_mm[i])))
+
+
+# --------------------------------------------------------------------------- block mesh
+
+
+def boundary_loop(n: int) -> np.ndarray:
+    """Vertex indices of the grid's border, counter-clockwise seen from +z, shape (4(n-1),).
+
+    Starts at (i, j) = (0, 0) (x0, y0) and runs along +x, then +y, -x, -y.
+    """
+    i0 = np.zeros(n - 1, np.int64)
+    r = np.arange(n - 1)
+    front = i0 * n + r  # i = 0, j = 0..n-2
+    right = r * n + (n - 1)  # j = n-1, i = 0..n-2
+    back = (n - 1) * n + (n - 1 - r)  # i = n-1, j = n-1..1
+    left = (n - 1 - r) * n  # j = 0, i = n-1..1
+    return np.concatenate([front, right, back, left])
+
+
+def block_mesh(
+    xs_mm: np.ndarray, ys_mm: np.ndarray, heights_mm: np.ndarray, z_bottom: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The saucer block: heightfield top, four walls, flat bottom (a fan).
+
+    Returns:
+        vertices (N*N + 4(N-1) + 1, 3) float64 mm; faces (F, 3) int64,
+        outward; face_id (F,) uint32: top triangle k has id k (k < 2(N-1)^2),
+        the walls ids T..T+3 (front, right, back, left) and the bottom T+4.
+    """
+    n = xs_mm.shape[0]
+    gx, gy = np.meshgrid(xs_mm, ys_mm)
+    top_v = np.stack([gx.ravel(), gy.ravel(), np.asarray(heights_mm, np.float64).ravel()], axis=1)
+    loop = boundary_loop(n)
+    m = loop.shape[0]
+    bot_v = top_v[loop].copy()
+    bot_v[:, 2] = z_bottom
+    centre = np.array([[0.5 * (xs_mm[0] + xs_mm[-1]), 0.5 * (ys_mm[0] + ys_mm[-1]), z_bottom]])
+    vertices = np.concatenate([top_v, bot_v, centre])
+    top_f = triangulate(n)
+    nt = top_f.shape[0]
+    k = np.arange(m)
+    a, b = loop, loop[(k + 1) % m]  # consecutive top border vertices (CCW)
+    a2, b2 = n * n + k, n * n + (k + 1) % m  # the bottom vertices below them
+    # (a, a', b') and (a, b', b): outward for a counter-clockwise loop (see module tests)
+    walls = np.concatenate([np.stack([a, a2, b2], 1), np.stack([a, b2, b], 1)])
+    side = np.concatenate([k // (n - 1), k // (n - 1)])
+    c = n * n + m
+    bottom = np.stack([np.full(m, c), b2, a2], axis=1)  # clockwise from above = facing down
+    faces = np.concatenate([top_f, walls, bottom]).astype(np.int64)
+    face_id = np.concatenate([np.arange(nt), nt + side, np.full(m, nt + 4)]).astype(np.uint32)
+    return vertices, faces, face_id
+
+
+def _signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    v = vertices[faces]
+    return float(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0)
+
+
+# --------------------------------------------------------------------------- seat
+
+
+def _cup_outline_mm(design: Design, mm_per_unit: float) -> np.ndarray:
+    """The cup's footprint in model mm, (K, 2), counter-clockwise.
+
+    Circles and ellipses get enough segments that the chord error stays
+    below 5 micrometres, so the clearance is what the user asked for.
+    """
+    cup = design.scene.cup
+    r = cup.circumradius * mm_per_unit
+    if cup.kind == "prism":
+        return cup.boundary() * mm_per_unit
+    seg = max(64, int(math.ceil(math.pi / math.acos(max(1.0 - 0.005 / r, -1.0)))))
+    return cup.boundary(min(seg, 2048)) * mm_per_unit
+
+
+def _cross_section(poly: np.ndarray):  # -> manifold3d.CrossSection
+    import manifold3d as m3d
+
+    return m3d.CrossSection([np.ascontiguousarray(poly, dtype=np.float64)])
+
+
+# --------------------------------------------------------------------------- build
+
+
+def _policy(profile: PrinterProfile | None, problems: list[str], warnings: list[str]) -> None:
+    """Warn or refuse (``profile.thin_policy``) on below-minimum walls and features."""
+    if not problems:
+        return
+    if profile is not None and profile.thin_policy == "refuse":
+        raise MeshError(
+            f"the part is too thin for {profile.name} (thin_policy = refuse): "
+            + "; ".join(problems)
+            + ". Use a larger cup diameter, thicker base/rim options, or a printer profile "
+            "with thin_policy = \"warn\"."
+        )
+    warnings.extend(problems)
+
+
+def build_solid(
+    design: Design,
+    mm_per_unit: float,
+    options: FabOptions | None = None,
+    profile: PrinterProfile | None = None,
+) -> Solid:
+    """Close ``design``'s heightfield into a watertight coloured-print-ready solid.
+
+    Args:
+        design: the design (heights in model units).
+        mm_per_unit: millimetres per model unit (``Scene.mm_per_unit``, or the
+            user's cup diameter / the cup's width in units).
+        options: base and seat settings.
+        profile: printer whose minimum wall and feature size are checked
+            (warned about or refused per its ``thin_policy``); None skips.
+
+    Raises:
+        MeshError: manifold3d rejects the mesh, the volume is not positive,
+            or the part is too thin for a ``refuse`` profile.
+    """
+    import manifold3d as m3d
+
+    opts = options or FabOptions()
+    if not (math.isfinite(mm_per_unit) and mm_per_unit > 0):
+        raise MeshError(f"mm_per_unit must be positive, got {mm_per_unit}")
+    grid = make_grid(design.scene.saucer)
+    s = float(mm_per_unit)
+    xs, ys = grid.xs * s, grid.ys * s
+    hmm = np.asarray(design.heights, np.float64) * s
+    z_bottom = min(-opts.base_thickness_mm, float(hmm.min()) - opts.min_thickness_mm)
+
+    warnings: list[str] = []
+    problems: list[str] = []
+    features = FeatureReport(0, math.inf, None)
+    if profile is not None:
+        wall = profile.min_wall_mm
+        for what, value in (
+            ("base_thickness_mm", opts.base_thickness_mm),
+            ("min_thickness_mm (under the saucer's lowest point)", opts.min_thickness_mm),
+        ):
+            if value < wall:
+                problems.append(f"{what} = {value:g} mm is below the minimum wall {wall:g} mm")
+        if opts.seat != "none" and opts.seat_rim_mm < wall:
+            problems.append(f"seat_rim_mm = {opts.seat_rim_mm:g} mm is below the minimum wall {wall:g} mm")
+        features = check_features(hmm, xs, ys, profile.min_feature_mm)
+        if features.count:
+            x, y = features.worst_xy_mm or (0.0, 0.0)
+            problems.append(
+                f"{features.count} spike/ridge vertices are thinner than the minimum feature "
+                f"{profile.min_feature_mm:g} mm (thinnest {features.min_width_mm:.3f} mm wide at "
+                f"half height, model-mm x={x:.2f} y={y:.2f}); they may print blunted"
+            )
+        _policy(profile, problems, warnings)
+
+    verts, faces, face_id = block_mesh(xs, ys, hmm, z_bottom)
+    n_top_in = 2 * (design.n - 1) ** 2
+    # A reserved mesh id marks the block's triangles through the booleans;
+    # with the per-triangle face ids it tells which output faces are top.
+    block_id = int(m3d.Manifold.reserve_ids(1))
+    block = m3d.Manifold(
+        m3d.Mesh64(
+            vert_properties=np.ascontiguousarray(verts, np.float64),
+            tri_verts=np.ascontiguousarray(faces, np.uint32),
+            face_id=face_id,
+            run_index=np.array([0, faces.size], np.uint32),
+            run_original_id=np.array([block_id], np.uint32),
+        )
+    )
+    if block.status() != m3d.Error.NoError:
+        raise MeshError(f"manifold3d rejected the saucer block: {block.status()}")
+
+    cup_outline = _cup_outline_mm(design, s)
+    footprint = m3d.CrossSection.square((xs[-1] - xs[0], ys[-1] - ys[0])).translate((xs[0], ys[0]))
+    solid = block
+    kind = opts.seat
+    top_z = 0.0
+    pocket = np.zeros((0, 2))
+    if kind != "none":
+        cup_cs = _cross_section(cup_outline)
+        inner = cup_cs.offset(opts.seat_clearance_mm, m3d.JoinType.Round) if opts.seat_clearance_mm > 0 else cup_cs
+        outer = cup_cs.offset(opts.seat_clearance_mm + opts.seat_rim_mm, m3d.JoinType.Round)
+        if not (inner - footprint).area() >= inner.area() * (1 - 1e-9):
+            warnings.append(
+                "the cup's clearance outline overlaps the saucer's footprint; the seat is clipped there"
+            )
+        plate_cs = m3d.CrossSection.batch_hull([outer, footprint]) - footprint
+        pocket_cs = inner - footprint
+        if kind == "recess":
+            top_z = opts.seat_depth_mm
+            plate = m3d.Manifold.extrude(plate_cs, top_z - z_bottom).translate((0.0, 0.0, z_bottom))
+            cut = m3d.Manifold.extrude(pocket_cs, top_z + 1.0)  # from the standing plane z = 0 up
+            solid = m3d.Manifold.batch_boolean([block, plate], m3d.OpType.Add) - cut
+        else:  # ring
+            top_z = opts.seat_depth_mm
+            plate = m3d.Manifold.extrude(plate_cs, -z_bottom).translate((0.0, 0.0, z_bottom))
+            ring = m3d.Manifold.extrude((outer - inner) - footprint, opts.seat_depth_mm)
+            solid = m3d.Manifold.batch_boolean([block, plate, ring], m3d.OpType.Add)
+        polys = pocket_cs.to_polygons()
+        pocket = np.asarray(max(polys, key=len), np.float64) if polys else pocket
+
+    solid = solid.set_tolerance(MERGE_TOLERANCE_MM)
+    status = solid.status()
+    volume = solid.volume()
+    if status != m3d.Error.NoError or not volume > 0:
+        raise MeshError(f"manifold3d could not build the solid: status {status}, volume {volume:g} mm^3")
+    if len(solid.decompose()) != 1:
+        raise MeshError("the solid fell apart into several pieces; check the seat options and the scene")
+
+    mesh = solid.to_mesh64()
+    v = np.asarray(mesh.vert_properties, np.float64)[:, :3]
+    f = np.asarray(mesh.tri_verts, np.int64)
+    fid = np.asarray(mesh.face_id, np.int64)
+    run_index = np.asarray(mesh.run_index, np.int64) // 3  # offsets into the flat tri_verts
+    run_orig = np.asarray(mesh.run_original_id, np.int64)
+    from_block = np.zeros(f.shape[0], bool)
+    for r, oid in enumerate(run_orig):
+        if oid == block_id:
+            from_block[run_index[r] : run_index[r + 1]] = True
+    is_top = from_block & (fid < n_top_in)
+
+    # Into the positive octant, then round once so every format writes the same numbers.
+    shift = -v.min(axis=0)
+    dec = opts.coord_decimals
+    v = np.round(v + shift, dec) + 0.0  # + 0.0 turns -0.0 into 0.0
+    v, f, is_top = canonical_order(v, f, is_top)
+    if np.unique(v, axis=0).shape[0] != v.shape[0]:
+        raise MeshError("two vertices of the solid round onto one position; raise coord_decimals")
+    vol = _signed_volume(v, f)
+    if not vol > 0:
+        raise MeshError(f"the written solid would have volume {vol:g} mm^3; it is inverted or empty")
+
+    m2f = np.eye(4)
+    m2f[:3, :3] *= s
+    m2f[:3, 3] = shift
+    cx, cy = shift[0], shift[1]
+    seat = SeatInfo(
+        kind=kind,
+        center_xy=(float(cx), float(cy)),
+        floor_z=float(shift[2]),
+        top_z=float(shift[2] + top_z) if kind != "none" else float(shift[2]),
+        pocket=pocket + shift[:2] if pocket.size else pocket,
+    )
+    if kind == "none":
+        warnings.append(
+            f"no cup seat: the cup must stand on a support {shift[2]:.2f} mm above the part's "
+            "base plane so its bottom is where the design assumes"
+        )
+    return Solid(
+        vertices=v,
+        faces=f,
+        is_top=is_top,
+        model_to_file=m2f,
+        grid_x=np.round(xs + shift[0], dec),
+        grid_y=np.round(ys + shift[1], dec),
+        heights=np.round(hmm + shift[2], dec),
+        bottom_z=float(np.round(z_bottom + shift[2], dec)),
+        volume_mm3=vol,
+        seat=seat,
+        features=features,
+        warnings=tuple(warnings),
+    )
+
+
+def canonical_order(
+    vertices: np.ndarray, faces: np.ndarray, is_top: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sort vertices by position and faces by (top first, vertex indices).
+
+    Each face is rotated (orientation kept) to start at its smallest index.
+    The result depends only on the geometry, not on the order a parallel
+    kernel produced it in, which makes the written files reproducible.
+    """
+    order = np.lexsort((vertices[:, 2], vertices[:, 1], vertices[:, 0]))
+    remap = np.empty_like(order)
+    remap[order] = np.arange(order.shape[0])
+    v = vertices[order]
+    f = remap[faces]
+    shift = np.argmin(f, axis=1)
+    rows = np.arange(f.shape[0])[:, None]
+    f = f[rows, (shift[:, None] + np.arange(3)[None, :]) % 3]
+    forder = np.lexsort((f[:, 2], f[:, 1], f[:, 0], ~is_top))
+    return v, f[forder], is_top[forder]

@@ -1,0 +1,10 @@
+"""The design optimizer (paper, sections 3.1-3.5): energies, DR solver, stages, texturing.
+
+Entry point: :func:`saucerfab.optimize.pipeline.run_design` with a
+:class:`saucerfab.optimize.request.DesignRequest`. torch is imported by the
+modules that need it, not here.
+"""
+
+from saucerfab.optimize.request import DesignRequest
+
+__all__ = ["DesignRequest"]

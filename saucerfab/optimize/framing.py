@@ -1,0 +1,73 @@
+"""Fitting the view frames to where the saucer actually appears.
+
+With the paper's preset the direct frame reaches past the saucer's far edge
+(its top third shows the cup's foot, not the saucer) and the saucer's
+reflection fills only about half of the reflected frame's width, so parts of
+the input images fall where no saucer can show them. ``fit_frames`` keeps the
+camera and re-aims each frame at the region the saucer covers in it:
+
+* ``"contain"``: the largest square frame inside the region's bounding box,
+  so the whole input image lands on the saucer (or its reflection);
+* ``"cover"``: the smallest square frame containing the region, so the whole
+  saucer is used and the image's margins fall off it.
+
+The scene's preset stays the default (``frames="scene"``); fitted frames are
+an option a designer chooses.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from saucerfab.errors import ConfigError
+from saucerfab.heightfield import make_grid
+from saucerfab.render.camera import Camera
+from saucerfab.scene import Scene, ViewFrame
+
+
+def _refit(cam: Camera, points: np.ndarray, mode: str) -> ViewFrame:
+    eye = np.asarray(cam.eye, np.float64)
+    frame_cam = cam
+    for _ in range(3):  # the re-aimed axis changes the perspective slightly; iterate
+        ndc = frame_cam.project(points)
+        lo, hi = ndc[:, :2].min(axis=0), ndc[:, :2].max(axis=0)
+        centre = (lo + hi) / 2
+        half = (hi - lo) / 2
+        side = float(half.min() if mode == "contain" else half.max())
+        r = frame_cam.axes()
+        w = frame_cam.tan_angle
+        d = r[2] + centre[0] * w * r[0] + centre[1] * w * r[1]
+        d /= np.linalg.norm(d)
+        dist = float(np.linalg.norm(np.asarray(frame_cam.target) - eye))
+        target = tuple(float(v) for v in eye + d * dist)
+        angle = math.degrees(math.atan(w * side))
+        frame_cam = Camera(cam.eye, target, angle, cam.image_size)
+    return ViewFrame(frame_cam.target, frame_cam.viewing_angle_deg, cam.image_size)
+
+
+def fit_frames(scene: Scene, heights: np.ndarray, mode: str = "contain") -> Scene:
+    """A copy of ``scene`` whose two frames are fitted to the saucer and its reflection.
+
+    Args:
+        heights: (N, N) base heights (the region barely depends on them).
+        mode: "contain" or "cover" (see the module docstring).
+    """
+    from saucerfab.mirror import reflect
+
+    if mode not in ("contain", "cover"):
+        raise ConfigError(f"frames mode must be 'contain' or 'cover', got {mode!r}")
+    grid = make_grid(scene.saucer)
+    h = np.asarray(heights, np.float64).reshape(-1)
+    direct = _refit(Camera.from_scene(scene, "direct"), grid.vertices(h), mode)
+    pts = []
+    for piece in reflect(scene, grid.xy()):
+        ok = piece.valid(h, scene.cup.height)
+        pts.append(piece.reflected_vertices(h)[ok])
+    allp = np.concatenate(pts) if pts else np.zeros((0, 3))
+    if allp.shape[0] < 3:
+        raise ConfigError("no part of the saucer is seen in the cup; move the saucer or the camera")
+    reflected = _refit(Camera.from_scene(scene, "reflected"), allp, mode)
+    return replace(scene, direct=direct, reflected=reflected)

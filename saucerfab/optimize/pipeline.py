@@ -1,0 +1,404 @@
+"""``run_design``: from a :class:`DesignRequest` to a design folder (Algorithm 1).
+
+1. ``prepare``: every input is read and validated before any work (scene,
+   shape, images, masks), so bad input stops at once with a clear message.
+2. the stages of :mod:`saucerfab.optimize.stages` (the paper's method or an
+   ablation), each a DR-solver run against blur-matched targets, with the
+   weights set from the compatibility score rho unless the user gives them;
+3. texturing with the final shape (section 3.4.2);
+4. metrics, previews and the design folder, written atomically.
+
+Checkpoints: after every stage, and on Ctrl-C, the iterate is saved in a
+sibling folder ``.<out name>.checkpoint``; running the same request again
+resumes from it (the request's hash must match). A finished run removes it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from saucerfab import __version__
+from saucerfab.design import Design, save_design, sha256_file
+from saucerfab.errors import ConfigError, Interrupted
+from saucerfab.fileio import write_bytes_atomic
+from saucerfab.optimize.request import DesignRequest
+from saucerfab.optimize.stages import ABLATION_STAGES, SIGMA_LARGE, WEIGHT_FACTORS, StageSpec
+from saucerfab.scene import Scene, load_scene, parse_cup_spec
+
+#: progress(stage, iteration, max_iterations, parts, elapsed_s)
+Progress = Callable[[str, int, int, dict[str, float], float], None]
+
+TEXTURE_MAX = 2048
+
+
+@dataclass
+class Prepared:
+    """Validated inputs of a run.
+
+    Attributes:
+        scene: the scene with the request's overrides applied.
+        base: (N, N) base heights, model units.
+        render: view name -> (S, S, 3) fitted input image in [0, 1].
+        texture: view name -> (T, T, 3) fitted input image for the texture.
+        enhanced: view name -> (S, S, 3) enhanced target (black-white or solid colour).
+        masks: view name -> (S, S) bool foreground mask.
+        inputs: names and sha256 of the input files.
+        reflected_groups: prism facet groups in two-reflection mode, else None.
+    """
+
+    scene: Scene
+    base: np.ndarray
+    render: dict[str, np.ndarray]
+    texture: dict[str, np.ndarray]
+    enhanced: dict[str, np.ndarray]
+    masks: dict[str, np.ndarray]
+    inputs: dict[str, Any]
+    reflected_groups: list[list[int]] | None
+
+
+def build_scene(request: DesignRequest) -> Scene:
+    """The request's scene with its cup, resolution and image-size overrides."""
+    scene = load_scene(request.scene)
+    if request.cup:
+        scene = replace(scene, cup=parse_cup_spec(request.cup))
+    if request.resolution is not None:
+        scene = replace(scene, saucer=replace(scene.saucer, resolution=int(request.resolution)))
+    if request.image_size is not None:
+        s = int(request.image_size)
+        scene = replace(
+            scene,
+            direct=replace(scene.direct, image_size=s),
+            reflected=replace(scene.reflected, image_size=s),
+        )
+    return scene
+
+
+def prepare(request: DesignRequest) -> Prepared:
+    """Read and validate every input; raise a SaucerfabError before any work."""
+    from saucerfab import images as im
+    from saucerfab.heightfield import load_shape
+
+    scene = build_scene(request)
+    if request.reflected2 is not None and scene.cup.kind != "prism":
+        raise ConfigError(
+            "a second reflected image needs a prism cup (e.g. --cup prism:6): only a prism's "
+            f"facets split the reflection into two regions; the scene's cup is a {scene.cup.kind}"
+        )
+    n = scene.saucer.resolution
+    base = load_shape(request.shape, n, height_scale=request.height_scale, seed=request.seed)
+    if request.frames != "scene":
+        from saucerfab.optimize.framing import fit_frames
+
+        scene = fit_frames(scene, base, request.frames)
+    s = scene.direct.image_size
+    t = int(min(TEXTURE_MAX, max(1024, s)))
+    names = ["direct", "reflected"] + (["reflected2"] if request.reflected2 is not None else [])
+    paths = {"direct": request.direct, "reflected": request.reflected, "reflected2": request.reflected2}
+    mask_paths = {
+        "direct": request.direct_mask,
+        "reflected": request.reflected_mask,
+        "reflected2": request.reflected2_mask,
+    }
+    render, texture, masks, inputs = {}, {}, {}, {}
+    for name in names:
+        path = paths[name]
+        if path is None:  # pragma: no cover - names only lists given images
+            continue
+        view = im.prepare_image(path, s, mask_path=mask_paths[name])
+        render[name] = view.flattened()
+        masks[name] = view.mask
+        # the texture keeps more of the input's detail than the render size
+        rgb_t, alpha_t, _ = im.fit_square(im.load_image(path), t, background=view.background)
+        texture[name] = rgb_t if alpha_t is None else im.flatten_alpha(rgb_t, alpha_t, view.background)
+        inputs[name] = {"file": Path(path).name, "sha256": view.sha256, "mask_source": view.mask_source}
+        if view.notes:
+            inputs[name]["notes"] = list(view.notes)
+        if mask_paths[name] is not None:
+            inputs[f"{name}_mask"] = {"file": Path(mask_paths[name]).name, "sha256": sha256_file(mask_paths[name])}
+    if Path(str(request.shape)).suffix.lower() in (".png", ".npy"):
+        inputs["shape"] = {"file": Path(request.shape).name, "sha256": sha256_file(request.shape)}
+    else:
+        inputs["shape"] = {"builtin": request.shape}
+    if len(names) == 2:
+        e_d, e_r = im.black_white_targets(masks["direct"], masks["reflected"])
+        enhanced = {"direct": e_d, "reflected": e_r}
+        groups = None
+    else:
+        e = im.solid_colour_targets([masks[k] for k in names])
+        enhanced = dict(zip(names, e))
+        from saucerfab.optimize.regions import split_reflected_facets
+
+        groups = split_reflected_facets(scene, base)
+    return Prepared(scene, base, render, texture, enhanced, masks, inputs, groups)
+
+
+def request_hash(request: DesignRequest, prepared: Prepared) -> str:
+    """Hash of everything that determines the result (for resume and batch)."""
+    d = asdict(request)
+    for k, v in list(d.items()):
+        if isinstance(v, Path):
+            d[k] = str(v)
+    payload = json.dumps({"req": d, "inputs": prepared.inputs, "v": __version__}, sort_keys=True, default=str)
+    return hashlib.sha256(payload.encode()).hexdigest()
+
+
+class _Checkpoint:
+    def __init__(self, out: Path, key: str) -> None:
+        self.dir = out.parent / f".{out.name}.checkpoint"
+        self.key = key
+
+    def load(self) -> dict[str, Any] | None:
+        f = self.dir / "state.npz"
+        if not f.is_file():
+            return None
+        try:
+            with np.load(f, allow_pickle=False) as z:
+                if str(z["key"]) != self.key:
+                    return None
+                return {
+                    "stage": int(z["stage"]),
+                    "h": z["h"],
+                    "c": z["c"],
+                    "log": json.loads(str(z["log"])),
+                    "metrics": json.loads(str(z["metrics"])),
+                    "weights": json.loads(str(z["weights"])),
+                }
+        except (OSError, ValueError, KeyError):
+            return None  # a damaged checkpoint is ignored; the run starts afresh
+
+    def save(self, stage: int, h: np.ndarray, c: np.ndarray, log: list, metrics: dict, weights: dict) -> None:
+        import io
+
+        buf = io.BytesIO()
+        np.savez(
+            buf,
+            key=np.array(self.key),
+            stage=np.array(stage),
+            h=h,
+            c=c,
+            log=np.array(json.dumps(log)),
+            metrics=np.array(json.dumps(metrics)),
+            weights=np.array(json.dumps(weights)),
+        )
+        write_bytes_atomic(self.dir / "state.npz", buf.getvalue())
+
+    def clear(self) -> None:
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+def _print_progress(stage: str, it: int, max_it: int, parts: dict[str, float], elapsed: float) -> None:
+    per = elapsed / max(it, 1)
+    left = per * (max_it - it)
+    print(
+        f"  {stage:22s} it {it:4d}/{max_it}  E {parts.get('E_total', 0):11.4g}  "
+        f"vis {parts.get('E_visual', 0):10.4g}  def {parts.get('E_deform', 0):9.3g}  "
+        f"{per * 1000:5.0f} ms/it  <= {left:5.0f} s left",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def run_design(
+    request: DesignRequest,
+    out: str | Path,
+    *,
+    progress: Progress | None = None,
+    log_every_s: float = 2.0,
+) -> Path:
+    """Run the whole method and write the design folder ``out`` atomically.
+
+    Args:
+        request: what to design.
+        out: the design folder to write (replaced atomically if it exists).
+        progress: called with (stage, iteration, max, energies, elapsed) about
+            every ``log_every_s`` seconds; default prints a line to stderr.
+
+    Raises:
+        SaucerfabError: bad inputs (before any work), Interrupted on Ctrl-C
+        (after saving a checkpoint).
+    """
+    import torch
+
+    from saucerfab.heightfield import laplacian
+    from saucerfab.optimize.energies import DeformEnergy, e_barrier, e_visual
+    from saucerfab.optimize.solver import ProxSettings, SolverSettings, solve
+    from saucerfab.optimize.targets import blur_matched_targets, compatibility
+    from saucerfab.optimize.texturing import texture_saucer, visible_faces
+    from saucerfab.optimize.views import Rig
+
+    out = Path(out)
+    t_start = time.perf_counter()
+    prep = prepare(request)
+    progress = progress or _print_progress
+    torch.manual_seed(request.seed)
+    scene = prep.scene
+    n = scene.saucer.resolution
+    delta = scene.saucer.delta
+    dtype = torch.float32
+    base = prep.base
+    rig = Rig(scene, base, reflected_groups=prep.reflected_groups)
+    z = torch.as_tensor(base.reshape(-1), dtype=dtype)
+    deform = DeformEnergy(laplacian(n), z)
+    stages = ABLATION_STAGES[request.ablation]
+    ckpt = _Checkpoint(out, request_hash(request, prep))
+
+    # weights from rho (section 3.5) unless given
+    t0 = time.perf_counter()
+    targets_cache: dict[tuple[str, float], dict[str, Any]] = {}
+
+    def targets_for(kind: str, sigma: float) -> dict[str, Any]:
+        key = (kind, sigma)
+        if key not in targets_cache:
+            imgs = prep.enhanced if kind == "enhanced" else prep.render
+            targets_cache[key] = blur_matched_targets(rig, base, imgs, sigma, dtype=dtype)
+        return targets_cache[key]
+
+    given = {"w_large": request.w_large, "w_small": request.w_small, "lam": request.lam}
+    if all(v is not None for v in given.values()):
+        rho = float("nan")
+        weights = {k: float(v) for k, v in given.items()}  # type: ignore[arg-type]
+    else:
+        rho = compatibility(rig, base, prep.enhanced, targets_for("enhanced", SIGMA_LARGE), SIGMA_LARGE, dtype=dtype)
+        weights = {k: (float(given[k]) if given[k] is not None else WEIGHT_FACTORS[k] * rho) for k in WEIGHT_FACTORS}
+    t_setup = time.perf_counter() - t0
+
+    h = torch.as_tensor(base.reshape(-1), dtype=dtype) + 0.0
+    c = torch.full((rig.num_faces, 3), 0.5, dtype=dtype)
+    log: list[dict[str, Any]] = []
+    metrics: dict[str, Any] = {"stages": [], "rho": rho, "weights": weights, "setup_s": t_setup}
+    first = 0
+    resumed = ckpt.load()
+    if resumed is not None:
+        first = resumed["stage"]
+        h = torch.as_tensor(resumed["h"], dtype=dtype)
+        c = torch.as_tensor(resumed["c"], dtype=dtype)
+        log = resumed["log"]
+        metrics = resumed["metrics"]
+        weights = resumed["weights"]
+        print(f"  resuming from checkpoint after stage {first} of {len(stages)}", file=sys.stderr)
+    # feasibility margin: the barrier is infinite on the boundary
+    c = c.clamp(1e-4, 1 - 1e-4)
+
+    h_e = h.clone()
+    for si in range(first, len(stages)):
+        spec: StageSpec = stages[si]
+        targets = targets_for(spec.targets, spec.sigma)
+        target_list = [targets[v.name] for v in rig.views]
+        w = weights[spec.weight] if spec.regulariser == "deform" else 0.0
+        prox = None
+        if spec.regulariser == "sparse":
+            h_e = h.clone()
+            prox = ProxSettings(center=h_e, lam=weights["lam"])
+        sigma = spec.sigma
+
+        def objective(hh: torch.Tensor, cc: torch.Tensor, *, _w: float = w, _s: float = sigma, _t: list = target_list):
+            imgs = rig.render(hh, cc, _s)
+            ev = e_visual(imgs, _t)
+            ed = deform(hh)
+            eb = e_barrier(hh, z, cc, delta)
+            total = ev + _w * ed + eb
+            return total, {"E_visual": float(ev), "E_deform": float(ed), "E_barrier": float(eb)}
+
+        stage_t0 = time.perf_counter()
+        last = [0.0]
+
+        def cb(it: int, total: float, parts: dict[str, float], _name: str = spec.name) -> None:
+            now = time.perf_counter()
+            log.append({"stage": _name, "iteration": it, "time_s": now - t_start, **parts})
+            if now - last[0] >= log_every_s:
+                last[0] = now
+                progress(_name, it, request.max_iters, parts, now - stage_t0)
+
+        settings = SolverSettings(max_iters=request.max_iters, lr_h=delta / 20)
+        try:
+            res = solve(objective, h, c, z, delta, settings, prox=prox, callback=cb)
+        except KeyboardInterrupt:
+            ckpt.save(si, h.numpy(), c.numpy(), log, metrics, weights)
+            raise Interrupted(
+                f"interrupted in stage {spec.name}; the last finished stage is saved in {ckpt.dir}. "
+                "Run the same command again to resume."
+            ) from None
+        h, c = res.h, res.c
+        vis = visible_faces(rig, h.numpy().reshape(n, n))
+        seen_d = vis["direct"]
+        seen_r = np.zeros_like(seen_d)
+        for k, v in vis.items():
+            if k != "direct":
+                seen_r |= v
+        any_seen = (seen_d | seen_r).sum()
+        with torch.no_grad():
+            ev = float(e_visual(rig.render(h, c, sigma), target_list))
+        metrics["stages"].append(
+            {
+                "name": spec.name,
+                "targets": spec.targets,
+                "sigma": sigma,
+                "regulariser": spec.regulariser,
+                "weight": w if spec.regulariser == "deform" else (weights["lam"] if prox else 0.0),
+                "iterations": res.iterations,
+                "converged": res.converged,
+                "seconds": res.seconds,
+                "seconds_per_iteration": res.seconds / max(res.iterations, 1),
+                "E_visual": ev,
+                "E_deform": float(deform(h)),
+                "E_sparse": float((h - h_e).abs().sum()) if prox else None,
+                "conflict_fraction": float((seen_d & seen_r).sum() / max(any_seen, 1)),
+                "max_abs_height_change": float((h - z).abs().max()),
+            }
+        )
+        progress(spec.name, res.iterations, request.max_iters, {**(res.log[-1] if res.log else {}), "E_total": res.energy}, res.seconds)
+        ckpt.save(si + 1, h.numpy(), c.numpy(), log, metrics, weights)
+
+    # texturing with the final shape
+    t0 = time.perf_counter()
+    heights = h.numpy().astype(np.float64).reshape(n, n)
+    tex = texture_saucer(rig, heights, prep.texture)
+    metrics["texturing_s"] = time.perf_counter() - t0
+    metrics["face_views"] = {
+        name: int((tex.face_view == k).sum()) for k, name in enumerate(["neither", "direct", "reflected", "both"])
+    }
+    metrics["max_abs_height_change"] = float(np.abs(heights - base).max())
+    metrics["E_deform"] = float(deform(torch.as_tensor(heights.reshape(-1), dtype=dtype)))
+    design = Design(
+        scene=scene,
+        heights=heights,
+        base_heights=base,
+        texture=tex.texture,
+        face_uvs=tex.face_uvs,
+        face_view=tex.face_view,
+        parameters=_parameters(request, weights, rho),
+        metrics=metrics,
+        inputs=prep.inputs,
+    )
+    from saucerfab.optimize.previews import make_previews
+
+    t0 = time.perf_counter()
+    previews, final_metrics = make_previews(design, rig, prep, c.numpy(), log)
+    metrics.update(final_metrics)
+    metrics["previews_s"] = time.perf_counter() - t0
+    metrics["total_s"] = time.perf_counter() - t_start
+    energy_log = "\n".join(json.dumps(e) for e in log).encode() + b"\n"
+    save_design(design, out, previews=previews, extra_files={"energy_log.jsonl": energy_log})
+    ckpt.clear()
+    return out
+
+
+def _parameters(request: DesignRequest, weights: dict[str, float], rho: float) -> dict[str, Any]:
+    d = asdict(request)
+    for k, v in list(d.items()):
+        if isinstance(v, Path):
+            d[k] = v.name
+    d["weights_used"] = weights
+    d["rho"] = rho
+    d["stages"] = [asdict(s) for s in ABLATION_STAGES[request.ablation]]
+    return d

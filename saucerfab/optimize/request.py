@@ -1,0 +1,78 @@
+"""What a design run is asked to do: inputs, scene, sizes, weights, switches."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from saucerfab.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class DesignRequest:
+    """All inputs of one ``saucerfab design`` run.
+
+    Attributes:
+        direct: image seen directly on the saucer (PNG/JPEG/WebP).
+        reflected: image seen in the mirror cup.
+        shape: base shape: a built-in name (``saucerfab shapes``) or a .png/.npy file.
+        scene: a preset name ("paper") or a scene TOML path.
+        reflected2: second reflected image (prism cups, two-reflection mode).
+        cup: optional cup spec overriding the scene's (``circle:R``, ``prism:6``...).
+        resolution: heightfield vertices per side (None: the scene's, 150).
+        image_size: rendered image size in pixels (None: the scene's, 512).
+        seed: seed for everything random (seeded shapes, tie breaks).
+        direct_mask, reflected_mask, reflected2_mask: optional foreground mask images.
+        height_scale: model units per unit of a shape file's values.
+        w_large, w_small, lam: weights overriding the automatic rho-based ones
+            (w for E_deform at sigma 1e-5 and 1e-7, lambda for E_sparse).
+        max_iters: iteration cap per stage.
+        ablation: one of "full" (the paper's method), "no_deform", "laplacian",
+            "laplacian_bw", "sparse_only", "laplacian_sparse" (Figure 11 a-f).
+        fast: coarse-to-fine and other speed-ups on (False: the paper as written).
+        frames: "scene" keeps the scene's view frames (the paper's preset);
+            "contain" / "cover" re-aim them at the saucer and its reflection
+            (:mod:`saucerfab.optimize.framing`).
+    """
+
+    direct: Path
+    reflected: Path
+    shape: str = "waves"
+    scene: str = "paper"
+    reflected2: Path | None = None
+    cup: str | None = None
+    resolution: int | None = None
+    image_size: int | None = None
+    seed: int = 0
+    direct_mask: Path | None = None
+    reflected_mask: Path | None = None
+    reflected2_mask: Path | None = None
+    height_scale: float = 0.1
+    w_large: float | None = None
+    w_small: float | None = None
+    lam: float | None = None
+    max_iters: int = 400
+    ablation: str = "full"
+    fast: bool = True
+    frames: str = "scene"
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    ABLATIONS = ("full", "no_deform", "laplacian", "laplacian_bw", "sparse_only", "laplacian_sparse")
+
+    def __post_init__(self) -> None:
+        for name in ("direct", "reflected", "reflected2", "direct_mask", "reflected_mask", "reflected2_mask"):
+            v = getattr(self, name)
+            if v is not None:
+                object.__setattr__(self, name, Path(os.fspath(v)))
+        if self.ablation not in self.ABLATIONS:
+            raise ConfigError(f"unknown ablation {self.ablation!r}; use one of {self.ABLATIONS}")
+        if self.frames not in ("scene", "contain", "cover"):
+            raise ConfigError(f"frames must be 'scene', 'contain' or 'cover', got {self.frames!r}")
+        if self.max_iters < 1:
+            raise ConfigError(f"max_iters must be at least 1, got {self.max_iters}")
+        for name in ("w_large", "w_small", "lam"):
+            v = getattr(self, name)
+            if v is not None and not (v >= 0):
+                raise ConfigError(f"{name} must be a non-negative number, got {v!r}")

@@ -1,0 +1,246 @@
+"""The DR solver (paper, section 3.3) and its proximal variant (section 3.4.1).
+
+Each iteration:
+
+1. the gradient of the smooth objective at the current iterate (it was
+   computed with the accepted trial of the previous iteration, so an
+   accepted step costs one forward and one backward render);
+2. an Adamax direction per variable group: ``m <- b1 m + (1 - b1) g``,
+   ``u <- max(b2 u, |g| + eps)``, step ``lr / (1 - b1^t) * m / u``
+   (torch.optim.Adamax's update, kept by hand so the line search can scale it);
+3. for the sparse stage, the heights' step becomes a proximal gradient step
+   (eq. 13-15) in Adamax's diagonal metric: with per-vertex step
+   ``s_i = alpha * lr_h / u_i`` the trial point is ``x = h - s * m_hat`` and
+   ``d^h = h - prox(x)``, where prox soft-thresholds ``x - h^e`` by
+   ``lam * s_i``. So a vertex leaves ``h^e`` only where its smoothed visual
+   gradient exceeds ``lam``: lam is compared with the gradient of E_visual,
+   which scales with the compatibility score rho exactly as lam = 6e-5 rho does;
+4. a backtracking line search on ``beta`` in {1, 1/2, 1/4, ...}: a trial is
+   accepted when it is strictly feasible (``|z - h| < delta``, ``0 < c < 1``,
+   so every barrier stays finite) and the full objective decreases by
+   Armijo's rule. If no trial is accepted the Adamax moments are reset, so the
+   next direction is the plain (descent) gradient direction.
+
+Stopping: the relative change of the objective is below ``tol`` (1e-4, the
+paper's) for ``patience`` accepted iterations in a row, or ``max_iters``.
+A patience above one keeps a single lucky flat step of the stochastic-looking
+Adamax trajectory from ending a stage early; ``patience=1`` is the paper verbatim.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import torch
+
+from saucerfab.optimize.energies import feasible, prox_l1
+
+#: objective(h, c) -> (value with autograd graph, {name: float} parts)
+Objective = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, dict[str, float]]]
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Settings of one DR-solver stage.
+
+    Attributes:
+        lr_h: Adamax step for heights, model units per iteration.
+        lr_c: Adamax step for colours, per iteration (colours in [0, 1]).
+        beta1, beta2, eps: Adamax's constants (torch defaults).
+        tol: relative energy change that ends the stage (paper: 1e-4).
+        patience: consecutive iterations below ``tol`` needed to stop.
+        max_iters: iteration cap.
+        max_backtracks: halvings of the step before giving up on a direction.
+        armijo: sufficient-decrease constant.
+        optimize_heights: False keeps h fixed (texture-only ablations).
+    """
+
+    lr_h: float = 2.5e-3
+    lr_c: float = 2e-2
+    beta1: float = 0.9
+    beta2: float = 0.999
+    eps: float = 1e-8
+    tol: float = 1e-4
+    patience: int = 3
+    max_iters: int = 400
+    max_backtracks: int = 6
+    armijo: float = 1e-4
+    optimize_heights: bool = True
+
+
+@dataclass(frozen=True)
+class ProxSettings:
+    """The sparse-spike stage's proximal step (eq. 13-15).
+
+    Attributes:
+        center: (V,) h^e, the heights after the enhanced stage.
+        lam: lambda, weight of E_sparse.
+        alpha: the proximal step (paper: 0.2), in units of the Adamax step.
+    """
+
+    center: torch.Tensor
+    lam: float
+    alpha: float = 0.2
+
+
+@dataclass
+class SolveResult:
+    """Outcome of one stage."""
+
+    h: torch.Tensor
+    c: torch.Tensor
+    iterations: int
+    energy: float
+    converged: bool
+    log: list[dict[str, float]] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+class _Adamax:
+    def __init__(self, shapes: list[torch.Size], like: torch.Tensor, s: SolverSettings) -> None:
+        self.s = s
+        self.m = [torch.zeros(sh, dtype=like.dtype) for sh in shapes]
+        self.u = [torch.zeros(sh, dtype=like.dtype) for sh in shapes]
+        self.t = 0
+
+    def reset(self) -> None:
+        for m, u in zip(self.m, self.u):
+            m.zero_()
+            u.zero_()
+        self.t = 0
+
+    def update(self, grads: list[torch.Tensor]) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        """Fold in ``grads``; return (bias-corrected m_hat, u) per group."""
+        self.t += 1
+        b1, b2 = self.s.beta1, self.s.beta2
+        out_m, out_u = [], []
+        for m, u, g in zip(self.m, self.u, grads):
+            m.mul_(b1).add_(g, alpha=1 - b1)
+            torch.maximum(u * b2, g.abs() + self.s.eps, out=u)
+            out_m.append(m / (1 - b1**self.t))
+            out_u.append(u)
+        return out_m, out_u
+
+
+def solve(
+    objective: Objective,
+    h0: torch.Tensor,
+    c0: torch.Tensor,
+    z: torch.Tensor,
+    delta: float,
+    settings: SolverSettings,
+    *,
+    prox: ProxSettings | None = None,
+    callback: Callable[[int, float, dict[str, float]], None] | None = None,
+    should_stop: Callable[[], bool] | None = None,
+) -> SolveResult:
+    """Minimise ``objective`` (+ ``lam * ||h - h^e||_1`` when ``prox``) from a feasible start.
+
+    Args:
+        objective: smooth part; returns the energy (with graph) and named parts.
+        h0: (V,) feasible heights. c0: (F, 3) feasible colours in (0, 1).
+        z: (V,) base heights; delta: the bound |z - h| < delta.
+        settings: solver settings. prox: the sparse stage's L1 term.
+        callback: called after each accepted iteration with (iteration, energy, parts).
+        should_stop: polled each iteration (e.g. a time budget); True ends the stage.
+
+    Returns:
+        The last accepted iterate, detached.
+    """
+    if not feasible(h0, z, c0, delta):
+        raise ValueError("the starting point must be strictly feasible")
+    t0 = time.perf_counter()
+    s = settings
+    h = h0.detach().clone()
+    c = c0.detach().clone()
+
+    def full(hh: torch.Tensor, cc: torch.Tensor) -> tuple[torch.Tensor, float, dict[str, float]]:
+        hh = hh.detach().requires_grad_(s.optimize_heights)
+        cc = cc.detach().requires_grad_(True)
+        e, parts = objective(hh, cc)
+        total = float(e.detach())
+        if prox is not None:
+            sp = float((hh.detach() - prox.center).abs().sum())
+            parts = {**parts, "E_sparse": sp}
+            total += prox.lam * sp
+        parts = {**parts, "E_total": total}
+        e._saucerfab_inputs = (hh, cc)  # type: ignore[attr-defined]
+        return e, total, parts
+
+    adam = _Adamax([h.shape, c.shape], h, s)
+    e, total, parts = full(h, c)
+    if not math.isfinite(total):
+        raise ValueError("the objective is not finite at the starting point")
+    e.backward()
+    hh, cc = e._saucerfab_inputs  # type: ignore[attr-defined]
+    g_h = hh.grad if hh.grad is not None else torch.zeros_like(h)
+    g_c = cc.grad if cc.grad is not None else torch.zeros_like(c)
+    log: list[dict[str, float]] = []
+    calm = 0
+    converged = False
+    it = 0
+    for it in range(1, s.max_iters + 1):
+        if should_stop is not None and should_stop():
+            break
+        (m_h, m_c), (u_h, u_c) = adam.update([g_h, g_c])
+        step_c = s.lr_c * m_c / u_c  # m_c is already bias-corrected
+        if not s.optimize_heights:
+            d_h = torch.zeros_like(h)
+        elif prox is None:
+            d_h = s.lr_h * m_h / u_h
+        else:
+            step = prox.alpha * s.lr_h / u_h
+            x = h - step * m_h
+            d_h = h - prox_l1(x, prox.center, prox.lam * step)
+        # directional derivative of the smooth part along -d (for Armijo)
+        slope = float((g_h * d_h).sum() + (g_c * step_c).sum())
+        accepted = False
+        # fraction to the boundary: start from the largest step that keeps
+        # the box constraints strictly satisfied (interior-point practice)
+        beta = min(1.0, 0.99 * _max_feasible_step(h, d_h, z, delta, c, step_c))
+        for _ in range(s.max_backtracks + 1):
+            h_try = h - beta * d_h
+            c_try = c - beta * step_c
+            if feasible(h_try, z, c_try, delta):
+                e_try, tot_try, parts_try = full(h_try, c_try)
+                if math.isfinite(tot_try) and tot_try <= total - s.armijo * beta * max(slope, 0.0):
+                    accepted = True
+                    break
+            beta *= 0.5
+        if not accepted:
+            adam.reset()
+            calm = 0
+            continue
+        e_try.backward()
+        hh, cc = e_try._saucerfab_inputs  # type: ignore[attr-defined]
+        g_h = hh.grad if hh.grad is not None else torch.zeros_like(h)
+        g_c = cc.grad if cc.grad is not None else torch.zeros_like(c)
+        rel = abs(total - tot_try) / max(abs(total), 1e-30)
+        h, c, total, parts = h_try.detach(), c_try.detach(), tot_try, parts_try
+        entry = {"iteration": float(it), "beta": beta, "time_s": time.perf_counter() - t0, **parts}
+        log.append(entry)
+        if callback is not None:
+            callback(it, total, parts)
+        calm = calm + 1 if rel < s.tol else 0
+        if calm >= s.patience:
+            converged = True
+            break
+    return SolveResult(h, c, it, total, converged, log, time.perf_counter() - t0)
+
+
+def _max_feasible_step(
+    h: torch.Tensor, d_h: torch.Tensor, z: torch.Tensor, delta: float, c: torch.Tensor, d_c: torch.Tensor
+) -> float:
+    """Largest beta with |z - (h - beta d_h)| <= delta and 0 <= c - beta d_c <= 1."""
+    best = float("inf")
+    for x, d, lo, hi in ((h, d_h, z - delta, z + delta), (c, d_c, 0.0, 1.0)):
+        down = d > 0  # x decreases towards lo
+        up = d < 0
+        if bool(down.any()):
+            best = min(best, float(((x - lo)[down] / d[down]).min()))
+        if bool(up.any()):
+            best = min(best, float(((hi - x)[up] / -d[up]).min()))
+    return max(best, 0.0)

@@ -1,0 +1,72 @@
+"""The stages of Algorithm 1 and the ablation settings of Figure 11.
+
+A stage is one DR-solver run with a fixed target set (the inputs or their
+black-white enhancement), a SoftRas sigma, and a regulariser: the Laplacian
+deformation energy with weight w (eq. 6/8), nothing, or the sparse spike
+energy with weight lambda solved by proximal steps (eq. 10).
+
+The paper's method ("full", Figure 11 f)::
+
+    enhanced, sigma 1e-5, w = 0.08 rho     -> convergence
+    enhanced, sigma 1e-7, w = 0.2 rho      -> convergence
+    enhanced, sigma 1e-7, sparse, lambda = 6e-5 rho, centred on the previous heights
+
+then texturing (always).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+SIGMA_LARGE = 1e-5
+SIGMA_SMALL = 1e-7
+
+
+@dataclass(frozen=True)
+class StageSpec:
+    """One optimisation stage.
+
+    Attributes:
+        name: label in logs and design.json.
+        targets: "enhanced" (eq. 7) or "original" (eq. 2).
+        sigma: SoftRas sigma.
+        regulariser: "deform", "none" or "sparse".
+        weight: which weight applies: "w_large", "w_small", "lam" or "" for none.
+    """
+
+    name: str
+    targets: str
+    sigma: float
+    regulariser: str
+    weight: str
+
+
+def _lap(prefix: str, targets: str) -> list[StageSpec]:
+    return [
+        StageSpec(f"{prefix}_sigma_large", targets, SIGMA_LARGE, "deform", "w_large"),
+        StageSpec(f"{prefix}_sigma_small", targets, SIGMA_SMALL, "deform", "w_small"),
+    ]
+
+
+#: Figure 11's six settings; "full" is the paper's method (f).
+ABLATION_STAGES: dict[str, list[StageSpec]] = {
+    # (a) no deformation energy: enhanced targets, heights free within delta
+    "no_deform": [
+        StageSpec("bw_free_sigma_large", "enhanced", SIGMA_LARGE, "none", ""),
+        StageSpec("bw_free_sigma_small", "enhanced", SIGMA_SMALL, "none", ""),
+    ],
+    # (b) Laplacian only, original images (eq. 6)
+    "laplacian": _lap("plain", "original"),
+    # (c) Laplacian with black-white enhancement (eq. 8)
+    "laplacian_bw": _lap("bw", "enhanced"),
+    # (d) sparse only (eq. 10 from the base shape)
+    "sparse_only": [StageSpec("sparse", "enhanced", SIGMA_SMALL, "sparse", "lam")],
+    # (e) sparse refinement of (b), with the original images
+    "laplacian_sparse": _lap("plain", "original")
+    + [StageSpec("sparse", "original", SIGMA_SMALL, "sparse", "lam")],
+    # (f) the paper's method: sparse refinement of (c)
+    "full": _lap("bw", "enhanced") + [StageSpec("sparse", "enhanced", SIGMA_SMALL, "sparse", "lam")],
+}
+
+#: rho multipliers (section 3.5)
+WEIGHT_FACTORS = {"w_large": 0.08, "w_small": 0.2, "lam": 6e-5}

@@ -1,0 +1,198 @@
+"""Texturing with the shape fixed (paper, section 3.4.2).
+
+Each saucer face is classified by where the viewer sees it: directly only,
+in the reflection only, in both, or in neither (:class:`FaceView`). Its
+texture coordinates are its corners' projections into the image of the view
+it is seen in. The texture is the input images side by side::
+
+    +-----------+-----------+-------------+
+    |  direct   | reflected | reflected2  |    each panel T x T, the view's whole frame
+    +-----------+-----------+-------------+
+
+A face seen in both views takes its reflected-image coordinates, and the
+reflected panel's texels under it become the average of the two images'
+colours there (the paper's rule). Faces seen in neither keep their
+direct-view projection (clamped to the panel); the fabrication bake gives
+them a smooth continuation of their neighbours' colours.
+
+Visibility is read from the hard rasterizer's face buffer at ``supersample``
+times the view's resolution, so faces smaller than a pixel are not lost.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from saucerfab.design import FaceView
+from saucerfab.optimize.targets import sample_bilinear
+from saucerfab.optimize.views import Rig
+
+
+@dataclass
+class TextureResult:
+    """Output of :func:`texture_saucer`.
+
+    Attributes:
+        texture: (T, K*T, 3) uint8, the panels side by side.
+        face_uvs: (F, 3, 2) float32 per-corner UVs (u right, v up) into ``texture``.
+        face_view: (F,) uint8 :class:`FaceView` per face.
+        face_panel: (F,) int8, panel index each face samples (0 = direct).
+    """
+
+    texture: np.ndarray
+    face_uvs: np.ndarray
+    face_view: np.ndarray
+    face_panel: np.ndarray
+
+
+def visible_faces(rig: Rig, heights: np.ndarray, supersample: int = 2) -> dict[str, np.ndarray]:
+    """Per view, (F,) bool: saucer faces that cover a (super)sample in that view."""
+    from saucerfab.render import rasterize_hard
+
+    h = np.asarray(heights, np.float64).reshape(-1)
+    out = {}
+    for view in rig.views:
+        vis = np.zeros(rig.num_faces, bool)
+        if view.faces.shape[0]:
+            cam = view.camera.with_size(view.camera.image_size * supersample)
+            fid, _, _ = rasterize_hard(torch.as_tensor(view.vertices_np(h)), view.faces, cam)
+            ids = np.unique(np.asarray(fid))
+            ids = ids[ids >= 0]
+            vis[view.face_src.numpy()[ids]] = True
+        out[view.name] = vis
+    return out
+
+
+def classify_faces(visible: dict[str, np.ndarray]) -> np.ndarray:
+    """(F,) uint8 FaceView from per-view visibility."""
+    d = visible["direct"]
+    r = np.zeros_like(d)
+    for name, v in visible.items():
+        if name != "direct":
+            r |= v
+    out = np.full(d.shape, FaceView.NEITHER, np.uint8)
+    out[d & ~r] = FaceView.DIRECT
+    out[r & ~d] = FaceView.REFLECTED
+    out[d & r] = FaceView.BOTH
+    return out
+
+
+def raster_triangles_2d(
+    tri: np.ndarray, width: int, height: int, chunk: int = 4096
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Texel centres inside 2-D triangles.
+
+    Args:
+        tri: (M, 3, 2) triangle corners in continuous pixel coordinates
+            ``(column, row)``; texel (i, j)'s centre is (j + 0.5, i + 0.5).
+        width, height: image size; texels outside are skipped.
+    Returns:
+        ``(rows, cols, tri_index, bary)``-style triple ``(flat_pixel (K,),
+        tri_index (K,), bary (K, 3))``; a texel on a shared edge may be
+        reported for both triangles.
+    """
+    pix_all, idx_all, bary_all = [], [], []
+    for s in range(0, tri.shape[0], chunk):
+        t = tri[s : s + chunk].astype(np.float64)
+        lo = np.floor(t.min(axis=1) - 0.5).astype(np.int64)
+        hi = np.ceil(t.max(axis=1) - 0.5).astype(np.int64)
+        lo = np.clip(lo, 0, [width - 1, height - 1])
+        hi = np.clip(hi, 0, [width - 1, height - 1])
+        span = hi - lo + 1
+        bw, bh = int(span[:, 0].max()), int(span[:, 1].max())
+        ox, oy = np.meshgrid(np.arange(bw), np.arange(bh))
+        px = lo[:, None, 0] + ox.reshape(1, -1)
+        py = lo[:, None, 1] + oy.reshape(1, -1)
+        inside_box = (px <= hi[:, None, 0]) & (py <= hi[:, None, 1])
+        cx, cy = px + 0.5, py + 0.5
+        a, b, c = t[:, 0], t[:, 1], t[:, 2]
+        den = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
+        ok_tri = np.abs(den) > 1e-12
+        den = np.where(ok_tri, den, 1.0)[:, None]
+        w0 = ((b[:, None, 1] - c[:, None, 1]) * (cx - c[:, None, 0]) + (c[:, None, 0] - b[:, None, 0]) * (cy - c[:, None, 1])) / den
+        w1 = ((c[:, None, 1] - a[:, None, 1]) * (cx - c[:, None, 0]) + (a[:, None, 0] - c[:, None, 0]) * (cy - c[:, None, 1])) / den
+        w2 = 1 - w0 - w1
+        eps = -1e-9
+        m = inside_box & ok_tri[:, None] & (w0 >= eps) & (w1 >= eps) & (w2 >= eps)
+        fi, ci = np.nonzero(m)
+        pix_all.append(py[fi, ci] * width + px[fi, ci])
+        idx_all.append(fi + s)
+        bary_all.append(np.stack([w0[fi, ci], w1[fi, ci], w2[fi, ci]], axis=1))
+    if not pix_all:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
+    return np.concatenate(pix_all), np.concatenate(idx_all), np.concatenate(bary_all)
+
+
+def _uv_from_ndc(ndc_xy: np.ndarray, panel: int, panels: int) -> np.ndarray:
+    """NDC (..., 2) in a view frame -> atlas UV (u right, v up), clamped to the panel."""
+    u = (panel + np.clip((ndc_xy[..., 0] + 1) / 2, 0, 1)) / panels
+    v = np.clip((ndc_xy[..., 1] + 1) / 2, 0, 1)
+    return np.stack([u, v], axis=-1)
+
+
+def texture_saucer(
+    rig: Rig,
+    heights: np.ndarray,
+    images: dict[str, np.ndarray],
+    *,
+    supersample: int = 2,
+) -> TextureResult:
+    """Texture the saucer with the input images (section 3.4.2).
+
+    Args:
+        heights: (N, N) final heights.
+        images: view name -> (T, T, 3) float image in [0, 1] covering that
+            view's frame (all the same T; may exceed the render size).
+    """
+    names = [v.name for v in rig.views]
+    k = len(names)
+    t = images["direct"].shape[0]
+    h = np.asarray(heights, np.float64).reshape(-1)
+    visible = visible_faces(rig, heights, supersample)
+    face_view = classify_faces(visible)
+    faces = rig.faces_np
+    nf = faces.shape[0]
+
+    direct = rig.view("direct")
+    ndc_d = direct.camera.project(direct.vertices_np(h))[:, :2]
+    uv_direct = _uv_from_ndc(ndc_d[faces], 0, k)  # (F, 3, 2)
+    face_uvs = uv_direct.copy()
+    face_panel = np.zeros(nf, np.int8)
+
+    panels = [np.clip(images[n], 0, 1).astype(np.float64) for n in names]
+    for p, view in enumerate(rig.views[1:], start=1):
+        if view.faces.shape[0] == 0:
+            continue
+        ndc_r = view.camera.project(view.vertices_np(h))[:, :2]
+        src = view.face_src.numpy()
+        uv_r = _uv_from_ndc(ndc_r[view.faces.numpy()], p, k)
+        seen = visible[view.name][src]
+        use = src[seen]
+        face_uvs[use] = uv_r[seen]
+        face_panel[use] = p
+        # Faces seen in both: average the two images under the face, in the
+        # reflected panel (paper: modify the reflected image's texels).
+        both = seen & (face_view[src] == FaceView.BOTH)
+        if both.any():
+            tri_r = ndc_to_texel(ndc_r[view.faces.numpy()[both]], t)
+            pix, ti, bary = raster_triangles_2d(tri_r, t, t)
+            tri_d = ndc_to_texel(ndc_d[faces[src[both]]], t)
+            pos_d = np.einsum("kc,kcd->kd", bary, tri_d[ti])
+            col_d = sample_bilinear(panels[0], pos_d)
+            flat = panels[p].reshape(-1, 3)
+            # a texel under several faces is averaged once, with the mean direct colour
+            cnt = np.bincount(pix, minlength=t * t).astype(np.float64)
+            acc = np.stack([np.bincount(pix, weights=col_d[:, c], minlength=t * t) for c in range(3)], 1)
+            hit = cnt > 0
+            flat[hit] = 0.5 * (flat[hit] + acc[hit] / cnt[hit, None])
+    texture = np.concatenate(panels, axis=1)
+    texture8 = np.clip(np.rint(texture * 255), 0, 255).astype(np.uint8)
+    return TextureResult(texture8, face_uvs.astype(np.float32), face_view, face_panel)
+
+
+def ndc_to_texel(ndc_xy: np.ndarray, size: int) -> np.ndarray:
+    """NDC (..., 2) -> continuous texel ``(column, row)`` in a size x size panel."""
+    return np.stack([(ndc_xy[..., 0] + 1) * size / 2, (1 - ndc_xy[..., 1]) * size / 2], axis=-1)

@@ -1,0 +1,191 @@
+"""The view rig: the saucer seen directly and in the mirror, as meshes to rasterize.
+
+Since vertices move only in z and the cup is a vertical cylinder, the
+reflected xy of every saucer vertex is computed once (:mod:`saucerfab.mirror`);
+a reflected vertex is ``(r_x, r_y, h)`` with the saucer vertex's height. Each
+view is therefore a fixed xy array, a gather index into ``h``, a face list and
+a gather index into the per-face colours ``c``, so rendering a view is one
+concatenation and one call of the soft rasterizer, differentiable in ``h`` and ``c``.
+
+Which reflected vertices are valid (T on the visible part of the cup, between
+its bottom and rim) is decided from the heights the rig is built with; the
+optimizer moves heights by less than delta, which moves T by less than delta
+in height, so the face sets stay fixed during a stage.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from saucerfab.heightfield import make_grid, triangulate
+from saucerfab.render.camera import Camera
+from saucerfab.scene import Scene
+
+#: the rendered images' background (where no face covers a pixel)
+BACKGROUND = (1.0, 1.0, 1.0)
+
+
+@dataclass
+class View:
+    """One rendered view.
+
+    Attributes:
+        name: "direct", "reflected" or "reflected2".
+        camera: the view's camera.
+        xy: (V', 2) fixed xy of the view's vertices, model units.
+        vert_src: (V',) int64, saucer vertex each view vertex takes its height from.
+        faces: (F', 3) int64 into the view's vertices.
+        face_src: (F',) int64, saucer face each view face takes its colour from.
+    """
+
+    name: str
+    camera: Camera
+    xy: torch.Tensor
+    vert_src: torch.Tensor
+    faces: torch.Tensor
+    face_src: torch.Tensor
+
+    def vertices(self, h: torch.Tensor) -> torch.Tensor:
+        """(V', 3) vertices for saucer heights ``h`` (V,)."""
+        return torch.cat([self.xy.to(h.dtype), h[self.vert_src].unsqueeze(1)], dim=1)
+
+    def vertices_np(self, h: np.ndarray) -> np.ndarray:
+        return np.concatenate(
+            [self.xy.numpy().astype(np.float64), np.asarray(h, np.float64).reshape(-1)[self.vert_src.numpy(), None]],
+            axis=1,
+        )
+
+
+class Rig:
+    """The saucer's views for one scene and resolution.
+
+    Args:
+        scene: the scene (its saucer resolution sets N).
+        heights: (N, N) heights used to decide the reflected faces' validity.
+        image_size: rendered image size S (default: the scene's).
+        reflected_groups: for prism cups in two-reflection mode, the facet
+            indices of each reflected image, e.g. ``[[0, 1], [4, 5]]``;
+            None renders every visible facet into one reflected view.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        heights: np.ndarray,
+        image_size: int | None = None,
+        reflected_groups: list[list[int]] | None = None,
+    ) -> None:
+        from saucerfab.mirror import reflect
+
+        self.scene = scene
+        n = scene.saucer.resolution
+        self.n = n
+        self.grid = make_grid(scene.saucer)
+        self.faces_np = triangulate(n)
+        xy = self.grid.xy()
+        self.xy = xy
+        nv, nf = n * n, self.faces_np.shape[0]
+        self.num_vertices, self.num_faces = nv, nf
+        size_d = image_size or scene.direct.image_size
+        size_r = image_size or scene.reflected.image_size
+        cam_d = Camera.from_scene(scene, "direct").with_size(size_d)
+        cam_r = Camera.from_scene(scene, "reflected").with_size(size_r)
+        self.views: list[View] = [
+            View(
+                "direct",
+                cam_d,
+                torch.as_tensor(xy),
+                torch.arange(nv),
+                torch.as_tensor(self.faces_np),
+                torch.arange(nf),
+            )
+        ]
+        pieces = reflect(scene, xy)
+        self.pieces = pieces
+        h_flat = np.asarray(heights, np.float64).reshape(-1)
+        groups: list[tuple[str, list]] = []
+        if reflected_groups is None:
+            groups.append(("reflected", pieces))
+        else:
+            names = ["reflected", "reflected2"]
+            if len(reflected_groups) > len(names):
+                raise ValueError("at most two reflected images are supported")
+            for name, facets in zip(names, reflected_groups):
+                groups.append((name, [p for p in pieces if p.facet in set(facets)]))
+        for name, group in groups:
+            xs, srcs, faces, fsrc = [], [], [], []
+            offset = 0
+            for piece in group:
+                ok = piece.valid(h_flat, scene.cup.height)
+                face_ok = ok[self.faces_np].all(axis=1)
+                if not face_ok.any():
+                    continue
+                keep = np.flatnonzero(ok)
+                remap = np.full(nv, -1, np.int64)
+                remap[keep] = np.arange(keep.size) + offset
+                xs.append(piece.r_xy[keep])
+                srcs.append(keep)
+                faces.append(remap[self.faces_np[face_ok]])
+                fsrc.append(np.flatnonzero(face_ok))
+                offset += keep.size
+            if not faces:
+                xs, srcs, faces, fsrc = [np.zeros((0, 2))], [np.zeros(0, np.int64)], [np.zeros((0, 3), np.int64)], [np.zeros(0, np.int64)]
+            self.views.append(
+                View(
+                    name,
+                    cam_r,
+                    torch.as_tensor(np.concatenate(xs)),
+                    torch.as_tensor(np.concatenate(srcs)),
+                    torch.as_tensor(np.concatenate(faces)),
+                    torch.as_tensor(np.concatenate(fsrc)),
+                )
+            )
+
+    def view(self, name: str) -> View:
+        for v in self.views:
+            if v.name == name:
+                return v
+        raise KeyError(name)
+
+    def render(
+        self,
+        h: torch.Tensor,
+        c: torch.Tensor,
+        sigma: float,
+        *,
+        views: list[str] | None = None,
+        backend: str = "auto",
+    ) -> list[torch.Tensor]:
+        """Soft-rasterize each view: a list of (S, S, 3) images, differentiable in h and c.
+
+        Args:
+            h: (V,) heights. c: (F, 3) per-face colours.
+            sigma: SoftRas sigma.
+        """
+        from saucerfab.render import soft_rasterize
+
+        out = []
+        for v in self.views:
+            if views is not None and v.name not in views:
+                continue
+            img, _ = soft_rasterize(
+                v.vertices(h),
+                v.faces,
+                c[v.face_src],
+                v.camera,
+                sigma=sigma,
+                background=BACKGROUND,
+                backend=backend,
+            )
+            out.append(img)
+        return out
+
+    def reflected_face_mask(self) -> np.ndarray:
+        """(F,) bool: saucer faces that take part in any reflected view."""
+        m = np.zeros(self.num_faces, bool)
+        for v in self.views[1:]:
+            m[v.face_src.numpy()] = True
+        return m

@@ -1,0 +1,191 @@
+"""Small numba building blocks that keep the rasterizer's inner loops vectorized.
+
+numba's ``math.exp`` becomes a call into libm, which stops LLVM from
+vectorizing the loop around it unless Intel's SVML is installed (it is not
+part of saucerfab's dependencies). :func:`vexp` is an exponential built from
+arithmetic, a float->int conversion and a bit cast only, so LLVM turns it into
+AVX/NEON code. It takes non-positive arguments (all the rasterizer needs) and
+returns 0 below the smallest normal result, so it never makes denormals.
+
+:func:`ftz_on` / :func:`ftz_restore` set and restore the x86 MXCSR
+flush-to-zero and denormals-are-zero bits of the calling thread (no-ops on
+other CPUs): tiny products such as ``prod (1 - D)`` deep inside many faces
+would otherwise fall into denormals, which cost about a hundred cycles each.
+"""
+
+from __future__ import annotations
+
+import platform
+
+import numpy as np
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic, overload
+
+_X86 = platform.machine().lower() in ("x86_64", "amd64", "i386", "i686")
+
+#: MXCSR bits: FTZ (bit 15) and DAZ (bit 6)
+_FTZ_DAZ = np.uint32(0x8040)
+
+
+@intrinsic
+def _bits_to_f32(typingctx, x):  # type: ignore[no-untyped-def]
+    """Reinterpret the low 32 bits of an integer as a float32 (LLVM ``bitcast``)."""
+    if not isinstance(x, types.Integer):
+        return None
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        v = args[0]
+        if x.bitwidth > 32:
+            v = builder.trunc(v, ir.IntType(32))
+        elif x.bitwidth < 32:
+            v = builder.sext(v, ir.IntType(32))
+        return builder.bitcast(v, ir.FloatType())
+
+    return types.float32(x), codegen
+
+
+@intrinsic
+def _bits_to_f64(typingctx, x):  # type: ignore[no-untyped-def]
+    """Reinterpret a 64-bit integer as a float64 (LLVM ``bitcast``)."""
+    if not isinstance(x, types.Integer):
+        return None
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        v = args[0]
+        if x.bitwidth < 64:
+            v = builder.sext(v, ir.IntType(64))
+        return builder.bitcast(v, ir.DoubleType())
+
+    return types.float64(x), codegen
+
+
+@intrinsic
+def _read_mxcsr(typingctx):  # type: ignore[no-untyped-def]
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        slot = cgutils.alloca_once(builder, ir.IntType(32))
+        fnty = ir.FunctionType(ir.VoidType(), [slot.type])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.x86.sse.stmxcsr")
+        builder.call(fn, [slot])
+        return builder.load(slot)
+
+    return types.uint32(), codegen
+
+
+@intrinsic
+def _write_mxcsr(typingctx, value):  # type: ignore[no-untyped-def]
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        slot = cgutils.alloca_once(builder, ir.IntType(32))
+        builder.store(args[0], slot)
+        fnty = ir.FunctionType(ir.VoidType(), [slot.type])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.x86.sse.ldmxcsr")
+        builder.call(fn, [slot])
+        return context.get_dummy_value()
+
+    return types.void(types.uint32), codegen
+
+
+if _X86:
+
+    @njit(inline="always")
+    def ftz_on() -> np.uint32:
+        """Set FTZ/DAZ on this thread; returns the previous MXCSR for :func:`ftz_restore`."""
+        old = _read_mxcsr()
+        _write_mxcsr(old | _FTZ_DAZ)
+        return old
+
+    @njit(inline="always")
+    def ftz_restore(old: np.uint32) -> None:
+        """Put back the MXCSR that :func:`ftz_on` returned."""
+        _write_mxcsr(old)
+
+else:  # other CPUs: denormals stay (correct, only slower)
+
+    @njit(inline="always")
+    def ftz_on() -> np.uint32:
+        return np.uint32(0)
+
+    @njit(inline="always")
+    def ftz_restore(old: np.uint32) -> None:
+        return None
+
+
+# --------------------------------------------------------------------------- exp
+#
+# exp(x) = 2^n exp(r), n = round(x / ln 2), r = x - n ln 2 with ln 2 split in
+# two (Cody-Waite) so r is exact to working precision.
+
+# float32: Cephes expf's polynomial (relative error about 1 ulp on |r| <= ln2/2)
+_F = np.float32
+_LOG2E_32 = _F(1.4426950408889634)
+_LN2HI_32 = _F(0.693359375)
+_LN2LO_32 = _F(-2.12194440e-4)
+_P32 = tuple(_F(v) for v in (1.9875691500e-4, 1.3981999507e-3, 8.3334519073e-3,
+                              4.1665795894e-2, 1.6666665459e-1, 5.0000001201e-1))
+_LO_32 = _F(-87.3)  # exp(-87.3) = 1.2e-38 > the smallest normal float32 (1.18e-38)
+_HALF_32, _ONE_32, _ZERO_32 = _F(0.5), _F(1.0), _F(0.0)
+
+# float64: Taylor series to degree 13 on |r| <= ln2/2 (truncation error < 5e-18)
+_D = np.float64
+_LOG2E_64 = _D(1.4426950408889634)
+_LN2HI_64 = _D(6.93145751953125e-1)
+_LN2LO_64 = _D(1.42860682030941723212e-6)
+_T64 = tuple(_D(1.0 / np.prod(np.arange(1, k + 1, dtype=np.float64))) for k in range(13, 1, -1))
+_LO_64 = _D(-708.0)  # exp(-708) = 3.3e-308 > the smallest normal float64 (2.2e-308)
+
+
+def vexp(x):  # type: ignore[no-untyped-def]
+    """``exp(x)`` for ``x <= 0`` (float32 or float64), vectorizable; 0 below the normal range.
+
+    Relative error: about 1e-7 (float32), 2e-16 (float64). NaN in, garbage out.
+    """
+    return np.exp(x)
+
+
+@overload(vexp)
+def _vexp_impl(x):  # type: ignore[no-untyped-def]
+    if x == types.float32:
+
+        def exp32(x):  # type: ignore[no-untyped-def]
+            xc = x if x > _LO_32 else _LO_32
+            n = np.floor(xc * _LOG2E_32 + _HALF_32)
+            r = xc - n * _LN2HI_32
+            r = r - n * _LN2LO_32
+            p = _P32[0]
+            p = p * r + _P32[1]
+            p = p * r + _P32[2]
+            p = p * r + _P32[3]
+            p = p * r + _P32[4]
+            p = p * r + _P32[5]
+            y = (p * r * r + r) + _ONE_32
+            scale = _bits_to_f32((np.int32(n) + np.int32(127)) << np.int32(23))
+            return _ZERO_32 if x < _LO_32 else y * scale
+
+        return exp32
+    if x == types.float64:
+
+        def exp64(x):  # type: ignore[no-untyped-def]
+            xc = x if x > _LO_64 else _LO_64
+            n = np.floor(xc * _LOG2E_64 + 0.5)
+            r = xc - n * _LN2HI_64
+            r = r - n * _LN2LO_64
+            p = _T64[0]
+            p = p * r + _T64[1]
+            p = p * r + _T64[2]
+            p = p * r + _T64[3]
+            p = p * r + _T64[4]
+            p = p * r + _T64[5]
+            p = p * r + _T64[6]
+            p = p * r + _T64[7]
+            p = p * r + _T64[8]
+            p = p * r + _T64[9]
+            p = p * r + _T64[10]
+            p = p * r + _T64[11]
+            y = (p * r * r + r) + 1.0
+            # int32 first: AVX2 converts doubles to int32 lanes, not to int64
+            scale = _bits_to_f64((np.int64(np.int32(n)) + np.int64(1023)) << np.int64(52))
+            return 0.0 if x < _LO_64 else y * scale
+
+        return exp64
+    return None

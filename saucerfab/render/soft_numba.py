@@ -1,0 +1,666 @@
+"""Compiled CPU kernels of the soft rasterizer (numba), wrapped in a torch autograd Function.
+
+Layout of the work (the formulas are :mod:`saucerfab.render.soft`'s):
+
+* torch computes per-face quantities from the vertices with autograd: the
+  projected corners ``cxy`` (F, 6), SoftRas's barycentric matrix ``inv``
+  (F, 9), the inverse corner depths ``iz`` (F, 3). The kernels see only these
+  and the colours, and return gradients for them; autograd carries those back
+  to the vertices through the projection and the determinant clamp.
+* Faces are binned into tiles of ``TILE_H x TILE_W`` pixels by their
+  bounding boxes widened by the influence radius. Every tile is owned whole by
+  one thread (``prange`` over tiles, largest first), so pixels are written
+  without atomics and the result does not depend on the thread count or the
+  schedule. The gradient of each (face, tile) pair goes to its own slot, and
+  the slots of a face are summed in a fixed order afterwards.
+* The innermost loop runs over ``LANES`` consecutive pixels of one row with
+  no branches (selects and masks only; pixels beyond a face's range are
+  excluded by the same distance test that defines the skip), a fixed trip
+  count and :func:`saucerfab.render._simd.vexp`, so LLVM vectorizes it (AVX2:
+  8 float32 or 4+4 float64 lanes). ``error_model="numpy"`` removes the
+  division-by-zero checks that would otherwise block it.
+* Per-pixel running state (softmax maximum, sum, colour, alpha product) lives
+  in small tile-local arrays that stay in L1; the forward keeps the maximum,
+  the sum and the alpha product per pixel for the backward, which recomputes
+  each pair's geometry (cheaper than storing millions of pairs).
+* float32 denormals are flushed to zero on the worker threads for the
+  duration of a tile (MXCSR restored afterwards).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numba import njit, prange
+
+from saucerfab.render._simd import ftz_on, ftz_restore, vexp
+from saucerfab.render.soft import DET_EPS, WSUM_EPS, distance_threshold
+
+if TYPE_CHECKING:
+    import torch
+
+    from saucerfab.render.camera import Camera
+
+#: pixels per vectorized inner loop: one AVX2 register of float32
+LANES = 8
+#: tile size in pixels; TILE_W is a multiple of LANES so lane groups never leave a tile
+TILE_W = 32
+TILE_H = 16
+#: gradient slots per (face, tile): 6 corner xy, 9 barycentric matrix, 3 inverse depths, 3 colours
+N_GRAD = 21
+
+# index of each constant in the parameter vector K handed to the kernels
+K_THR, K_INV_SIGMA, K_NEAR, K_FAR, K_INV_FR, K_INV_GAMMA, K_EPS, K_SUM0, K_BG = 0, 1, 2, 3, 4, 5, 6, 7, 8
+K_WSUM, K_EE_MIN, K_ZERO, K_ONE, N_K = 11, 12, 13, 14, 15
+
+_OPTS: dict[str, Any] = dict(error_model="numpy", cache=True, nogil=True, fastmath={"contract"})
+
+
+# --------------------------------------------------------------------------- binning
+
+
+@njit(**_OPTS)
+def _face_boxes(cxy: np.ndarray, radius: float, size: int) -> np.ndarray:  # pragma: no cover - jit
+    """(F, 4) int32 inclusive pixel boxes (row0, row1, col0, col1) of the widened faces.
+
+    The same formula as :func:`saucerfab.render.soft_torch.face_pixel_boxes`
+    (float64); an empty box has row1 < row0.
+    """
+    n = cxy.shape[0]
+    out = np.empty((n, 4), np.int32)
+    s = float(size)
+    for f in range(n):
+        x0, y0 = float(cxy[f, 0]), float(cxy[f, 1])
+        x1, y1 = float(cxy[f, 2]), float(cxy[f, 3])
+        x2, y2 = float(cxy[f, 4]), float(cxy[f, 5])
+        lox, hix = min(x0, x1, x2), max(x0, x1, x2)
+        loy, hiy = min(y0, y1, y2), max(y0, y1, y2)
+        if not (np.isfinite(lox) and np.isfinite(hix) and np.isfinite(loy) and np.isfinite(hiy)):
+            out[f, 0], out[f, 1], out[f, 2], out[f, 3] = 0, -1, 0, -1
+            continue
+        # clamp before rounding so far-off faces cannot overflow the integers
+        c0 = math.ceil(min(max(((lox - radius + 1) * s - 1) / 2, -1.0), s))
+        c1 = math.floor(min(max(((hix + radius + 1) * s - 1) / 2, -1.0), s))
+        r0 = math.ceil(min(max(((1 - hiy - radius) * s - 1) / 2, -1.0), s))
+        r1 = math.floor(min(max(((1 - loy + radius) * s - 1) / 2, -1.0), s))
+        out[f, 0] = max(r0, 0)
+        out[f, 1] = min(r1, size - 1)
+        out[f, 2] = max(c0, 0)
+        out[f, 3] = min(c1, size - 1)
+    return out
+
+
+@njit(**_OPTS)
+def _bin_faces(box: np.ndarray, n_ty: int, n_tx: int):  # type: ignore[no-untyped-def] # pragma: no cover
+    """Bin faces into tiles.
+
+    Returns ``(tile_start (T+1,), tile_entry (E,), entry_face (E,), face_start (F+1,))``:
+    entry ids are numbered face by face (a face's entries are contiguous, so its
+    gradient slots are summed in a fixed order), and each tile's entries are in
+    increasing face order.
+    """
+    n = box.shape[0]
+    n_tiles = n_ty * n_tx
+    count = np.zeros(n_tiles + 1, np.int64)
+    face_start = np.zeros(n + 1, np.int64)
+    for f in range(n):
+        r0, r1, c0, c1 = box[f, 0], box[f, 1], box[f, 2], box[f, 3]
+        k = 0
+        if r1 >= r0 and c1 >= c0:
+            for ty in range(r0 // TILE_H, r1 // TILE_H + 1):
+                for tx in range(c0 // TILE_W, c1 // TILE_W + 1):
+                    count[ty * n_tx + tx + 1] += 1
+                    k += 1
+        face_start[f + 1] = face_start[f] + k
+    tile_start = np.cumsum(count)
+    n_entries = face_start[n]
+    tile_entry = np.empty(n_entries, np.int64)
+    entry_face = np.empty(n_entries, np.int64)
+    fill = tile_start[:-1].copy()
+    e = 0
+    for f in range(n):
+        r0, r1, c0, c1 = box[f, 0], box[f, 1], box[f, 2], box[f, 3]
+        if r1 >= r0 and c1 >= c0:
+            for ty in range(r0 // TILE_H, r1 // TILE_H + 1):
+                for tx in range(c0 // TILE_W, c1 // TILE_W + 1):
+                    t = ty * n_tx + tx
+                    tile_entry[fill[t]] = e
+                    fill[t] += 1
+                    entry_face[e] = f
+                    e += 1
+    return tile_start, tile_entry, entry_face, face_start
+
+
+# --------------------------------------------------------------------------- forward
+
+
+@njit(**_OPTS)
+def _forward_tile(
+    t, n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col, px_tab, py_tab, K,
+    image, alpha, st_m, st_s, st_p,
+):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Render tile ``t``: write ``image``/``alpha`` and the backward's per-pixel state."""
+    ty, tx = t // n_tx, t % n_tx
+    rt0, ct0 = ty * TILE_H, tx * TILE_W
+    n_loc = TILE_H * TILE_W
+    zero, one = K[K_ZERO], K[K_ONE]
+    thr, inv_sigma, near, far = K[K_THR], K[K_INV_SIGMA], K[K_NEAR], K[K_FAR]
+    inv_fr, inv_gamma, wsum_min, ee_min = K[K_INV_FR], K[K_INV_GAMMA], K[K_WSUM], K[K_EE_MIN]
+    m = np.empty(n_loc, K.dtype)
+    ssum = np.empty(n_loc, K.dtype)
+    cr = np.empty(n_loc, K.dtype)
+    cg = np.empty(n_loc, K.dtype)
+    cb = np.empty(n_loc, K.dtype)
+    pr = np.empty(n_loc, K.dtype)
+    # SoftRas's start: running maximum eps, running sum exp(eps/gamma), colour bg * sum
+    for q in range(n_loc):
+        m[q] = K[K_EPS]
+        ssum[q] = K[K_SUM0]
+        cr[q] = K[K_BG] * K[K_SUM0]
+        cg[q] = K[K_BG + 1] * K[K_SUM0]
+        cb[q] = K[K_BG + 2] * K[K_SUM0]
+        pr[q] = one
+
+    for idx in range(tile_start[t], tile_start[t + 1]):
+        f = entry_face[tile_entry[idx]]
+        ra, rb = max(box[f, 0], rt0), min(box[f, 1], rt0 + TILE_H - 1)
+        ca, cbx = max(box[f, 2], ct0), min(box[f, 3], ct0 + TILE_W - 1)
+        if rb < ra or cbx < ca:
+            continue
+        ax0, ay0, ax1, ay1, ax2, ay2 = cxy[f, 0], cxy[f, 1], cxy[f, 2], cxy[f, 3], cxy[f, 4], cxy[f, 5]
+        ex0, ey0 = ax1 - ax0, ay1 - ay0
+        ex1, ey1 = ax2 - ax1, ay2 - ay1
+        ex2, ey2 = ax0 - ax2, ay0 - ay2
+        # degenerate edges project onto their start (as the torch backend's clamp)
+        ie0 = one / max(ex0 * ex0 + ey0 * ey0, ee_min)
+        ie1 = one / max(ex1 * ex1 + ey1 * ey1, ee_min)
+        ie2 = one / max(ex2 * ex2 + ey2 * ey2, ee_min)
+        i00, i01, i02 = inv[f, 0], inv[f, 1], inv[f, 2]
+        i10, i11, i12 = inv[f, 3], inv[f, 4], inv[f, 5]
+        i20, i21, i22 = inv[f, 6], inv[f, 7], inv[f, 8]
+        iz0, iz1, iz2 = iz[f, 0], iz[f, 1], iz[f, 2]
+        fr, fg, fb = col[f, 0], col[f, 1], col[f, 2]
+        cs0 = ca - (ca % LANES)
+        for r in range(ra, rb + 1):
+            py = py_tab[r]
+            b0 = i01 * py + i02
+            b1 = i11 * py + i12
+            b2 = i21 * py + i22
+            hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
+            row = (r - rt0) * TILE_W - ct0
+            for cs in range(cs0, cbx + 1, LANES):
+                for lane in range(LANES):
+                    c = cs + lane
+                    q = row + c
+                    px = px_tab[c]
+                    w0 = i00 * px + b0
+                    w1 = i10 * px + b1
+                    w2 = i20 * px + b2
+                    inside = (w0 > zero) & (w0 < one) & (w1 > zero) & (w1 < one) & (w2 > zero) & (w2 < one)
+                    # squared distance to the closed triangle = nearest of the three segments
+                    hx = px - ax0
+                    tt = (hx * ex0 + hy0 * ey0) * ie0
+                    tt = min(max(tt, zero), one)
+                    dx, dy = tt * ex0 - hx, tt * ey0 - hy0
+                    d2 = dx * dx + dy * dy
+                    hx = px - ax1
+                    tt = (hx * ex1 + hy1 * ey1) * ie1
+                    tt = min(max(tt, zero), one)
+                    dx, dy = tt * ex1 - hx, tt * ey1 - hy1
+                    d2 = min(d2, dx * dx + dy * dy)
+                    hx = px - ax2
+                    tt = (hx * ex2 + hy2 * ey2) * ie2
+                    tt = min(max(tt, zero), one)
+                    dx, dy = tt * ex2 - hx, tt * ey2 - hy2
+                    d2 = min(d2, dx * dx + dy * dy)
+                    valid = inside | (d2 < thr)
+                    xs = (d2 if inside else -d2) * inv_sigma
+                    ex = vexp(-abs(xs))
+                    rec = one / (one + ex)
+                    erec = ex * rec
+                    cov = rec if xs >= zero else erec  # sigmoid(xs)
+                    unc = erec if xs >= zero else rec  # 1 - sigmoid(xs)
+                    pr[q] = pr[q] * (unc if valid else one)
+                    # perspective-correct depth from the clipped barycentrics
+                    wc0 = min(max(w0, zero), one)
+                    wc1 = min(max(w1, zero), one)
+                    wc2 = min(max(w2, zero), one)
+                    sw = max(wc0 + wc1 + wc2, wsum_min)
+                    zq = (wc0 * iz0 + wc1 * iz1 + wc2 * iz2) / sw
+                    z = one / zq
+                    rgb = valid & (z >= near) & (z <= far)
+                    zn = (far - z) * inv_fr
+                    # online softmax with SoftRas's running maximum, one exp per pair
+                    mo = m[q]
+                    dz = zn - mo
+                    e = vexp(-abs(dz) * inv_gamma)
+                    newmax = rgb & (dz > zero)
+                    scale = e if newmax else one
+                    term = (one if newmax else e) * cov
+                    term = term if rgb else zero
+                    m[q] = zn if newmax else mo
+                    ssum[q] = ssum[q] * scale + term
+                    cr[q] = cr[q] * scale + term * fr
+                    cg[q] = cg[q] * scale + term * fg
+                    cb[q] = cb[q] * scale + term * fb
+
+    for r in range(rt0, min(rt0 + TILE_H, size)):
+        for c in range(ct0, min(ct0 + TILE_W, size)):
+            q = (r - rt0) * TILE_W + (c - ct0)
+            g = r * wp + c
+            image[r, c, 0] = cr[q] / ssum[q]
+            image[r, c, 1] = cg[q] / ssum[q]
+            image[r, c, 2] = cb[q] / ssum[q]
+            alpha[r, c] = one - pr[q]
+            st_m[g] = m[q]
+            st_s[g] = ssum[q]
+            st_p[g] = pr[q]
+
+
+@njit(parallel=True, **_OPTS)
+def _forward(
+    order, n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col, px_tab, py_tab, K,
+    image, alpha, st_m, st_s, st_p,
+):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    for k in prange(order.shape[0]):
+        old = ftz_on()
+        _forward_tile(
+            order[k], n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col,
+            px_tab, py_tab, K, image, alpha, st_m, st_s, st_p,
+        )
+        ftz_restore(old)
+
+
+# --------------------------------------------------------------------------- backward
+
+
+@njit(**_OPTS)
+def _backward_tile(
+    t, n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col, px_tab, py_tab, K,
+    image, g_image, g_alpha, st_m, st_s, st_p, grad,
+):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Gradients of tile ``t``'s pixels into the slots ``grad[entry]`` of its entries."""
+    ty, tx = t // n_tx, t % n_tx
+    rt0, ct0 = ty * TILE_H, tx * TILE_W
+    n_loc = TILE_H * TILE_W
+    zero, one = K[K_ZERO], K[K_ONE]
+    two = one + one
+    thr, inv_sigma, near, far = K[K_THR], K[K_INV_SIGMA], K[K_NEAR], K[K_FAR]
+    inv_fr, inv_gamma, wsum_min, ee_min = K[K_INV_FR], K[K_INV_GAMMA], K[K_WSUM], K[K_EE_MIN]
+    # per pixel: dL/dimage / sum (3), sum_k dL/dimage_k image_k / sum, dL/dalpha * prod(1 - D), max
+    g0 = np.zeros(n_loc, K.dtype)
+    g1 = np.zeros(n_loc, K.dtype)
+    g2 = np.zeros(n_loc, K.dtype)
+    gi = np.zeros(n_loc, K.dtype)
+    ap = np.zeros(n_loc, K.dtype)
+    m = np.zeros(n_loc, K.dtype)
+    for r in range(rt0, min(rt0 + TILE_H, size)):
+        for c in range(ct0, min(ct0 + TILE_W, size)):
+            q = (r - rt0) * TILE_W + (c - ct0)
+            g = r * wp + c
+            rs = one / st_s[g]
+            a0, a1, a2 = g_image[r, c, 0] * rs, g_image[r, c, 1] * rs, g_image[r, c, 2] * rs
+            g0[q], g1[q], g2[q] = a0, a1, a2
+            gi[q] = a0 * image[r, c, 0] + a1 * image[r, c, 1] + a2 * image[r, c, 2]
+            ap[q] = g_alpha[r, c] * st_p[g]
+            m[q] = st_m[g]
+
+    acc = np.zeros(N_GRAD * LANES, K.dtype)
+    for idx in range(tile_start[t], tile_start[t + 1]):
+        entry = tile_entry[idx]
+        f = entry_face[entry]
+        ra, rb = max(box[f, 0], rt0), min(box[f, 1], rt0 + TILE_H - 1)
+        ca, cbx = max(box[f, 2], ct0), min(box[f, 3], ct0 + TILE_W - 1)
+        if rb < ra or cbx < ca:
+            for j in range(N_GRAD):
+                grad[entry, j] = zero
+            continue
+        acc[:] = zero
+        ax0, ay0, ax1, ay1, ax2, ay2 = cxy[f, 0], cxy[f, 1], cxy[f, 2], cxy[f, 3], cxy[f, 4], cxy[f, 5]
+        ex0, ey0 = ax1 - ax0, ay1 - ay0
+        ex1, ey1 = ax2 - ax1, ay2 - ay1
+        ex2, ey2 = ax0 - ax2, ay0 - ay2
+        ie0 = one / max(ex0 * ex0 + ey0 * ey0, ee_min)
+        ie1 = one / max(ex1 * ex1 + ey1 * ey1, ee_min)
+        ie2 = one / max(ex2 * ex2 + ey2 * ey2, ee_min)
+        i00, i01, i02 = inv[f, 0], inv[f, 1], inv[f, 2]
+        i10, i11, i12 = inv[f, 3], inv[f, 4], inv[f, 5]
+        i20, i21, i22 = inv[f, 6], inv[f, 7], inv[f, 8]
+        iz0, iz1, iz2 = iz[f, 0], iz[f, 1], iz[f, 2]
+        fr, fg, fb = col[f, 0], col[f, 1], col[f, 2]
+        cs0 = ca - (ca % LANES)
+        for r in range(ra, rb + 1):
+            py = py_tab[r]
+            b0 = i01 * py + i02
+            b1 = i11 * py + i12
+            b2 = i21 * py + i22
+            hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
+            row = (r - rt0) * TILE_W - ct0
+            for cs in range(cs0, cbx + 1, LANES):
+                for lane in range(LANES):
+                    c = cs + lane
+                    q = row + c
+                    px = px_tab[c]
+                    w0 = i00 * px + b0
+                    w1 = i10 * px + b1
+                    w2 = i20 * px + b2
+                    inside = (w0 > zero) & (w0 < one) & (w1 > zero) & (w1 < one) & (w2 > zero) & (w2 < one)
+                    # nearest segment, keeping which edge (k) and where on it (t) for the gradient
+                    hx = px - ax0
+                    tt = (hx * ex0 + hy0 * ey0) * ie0
+                    tt = min(max(tt, zero), one)
+                    dx, dy = tt * ex0 - hx, tt * ey0 - hy0
+                    d2 = dx * dx + dy * dy
+                    bt, bdx, bdy, e1sel, e2sel = tt, dx, dy, False, False
+                    hx = px - ax1
+                    tt = (hx * ex1 + hy1 * ey1) * ie1
+                    tt = min(max(tt, zero), one)
+                    dx, dy = tt * ex1 - hx, tt * ey1 - hy1
+                    dd = dx * dx + dy * dy
+                    better = dd < d2
+                    d2 = dd if better else d2
+                    bt = tt if better else bt
+                    bdx = dx if better else bdx
+                    bdy = dy if better else bdy
+                    e1sel = better
+                    hx = px - ax2
+                    tt = (hx * ex2 + hy2 * ey2) * ie2
+                    tt = min(max(tt, zero), one)
+                    dx, dy = tt * ex2 - hx, tt * ey2 - hy2
+                    dd = dx * dx + dy * dy
+                    better = dd < d2
+                    d2 = dd if better else d2
+                    bt = tt if better else bt
+                    bdx = dx if better else bdx
+                    bdy = dy if better else bdy
+                    e1sel = e1sel & (not better)
+                    e2sel = better
+                    e0sel = not (e1sel | e2sel)
+                    valid = inside | (d2 < thr)
+                    xs = (d2 if inside else -d2) * inv_sigma
+                    ex = vexp(-abs(xs))
+                    rec = one / (one + ex)
+                    erec = ex * rec
+                    cov = rec if xs >= zero else erec
+                    unc = erec if xs >= zero else rec
+                    wc0 = min(max(w0, zero), one)
+                    wc1 = min(max(w1, zero), one)
+                    wc2 = min(max(w2, zero), one)
+                    rsw = wc0 + wc1 + wc2
+                    sw = max(rsw, wsum_min)
+                    zq = (wc0 * iz0 + wc1 * iz1 + wc2 * iz2) / sw
+                    z = one / zq
+                    rgb = valid & (z >= near) & (z <= far)
+                    zn = (far - z) * inv_fr
+                    ez = vexp(min(zn - m[q], zero) * inv_gamma)
+                    wf = cov * ez
+                    wf = wf if rgb else zero  # the pair's softmax weight, shifted by the max
+                    gw = g0[q] * fr + g1[q] * fg + g2[q] * fb - gi[q]  # dL/d(weight) * sum
+                    # dL/dxs: alpha through prod(1 - D), colour through the weight
+                    ga = ap[q] * cov
+                    gx = (ga if valid else zero) + gw * wf * unc
+                    gd = two * gx * inv_sigma
+                    gd = gd if inside else -gd  # d(sign d^2)/d(d^2)
+                    u, v = gd * bdx, gd * bdy
+                    omt = one - bt
+                    k0 = (omt if e0sel else zero) + (bt if e2sel else zero)
+                    k1 = (omt if e1sel else zero) + (bt if e0sel else zero)
+                    k2 = (omt if e2sel else zero) + (bt if e1sel else zero)
+                    acc[0 * LANES + lane] += u * k0
+                    acc[1 * LANES + lane] += v * k0
+                    acc[2 * LANES + lane] += u * k1
+                    acc[3 * LANES + lane] += v * k1
+                    acc[4 * LANES + lane] += u * k2
+                    acc[5 * LANES + lane] += v * k2
+                    # depth: zn = (far - 1/zq)/(far - near), zq = sum(wc iz)/sw
+                    gq = gw * wf * inv_gamma * inv_fr * z * z  # dL/dzq
+                    gqs = gq / sw
+                    acc[15 * LANES + lane] += gqs * wc0
+                    acc[16 * LANES + lane] += gqs * wc1
+                    acc[17 * LANES + lane] += gqs * wc2
+                    zsub = zq if rsw >= wsum_min else zero
+                    gw0 = gqs * (iz0 - zsub)
+                    gw1 = gqs * (iz1 - zsub)
+                    gw2 = gqs * (iz2 - zsub)
+                    # the clamp passes the gradient on [0, 1] (as torch.clamp does)
+                    gw0 = gw0 if (w0 >= zero) & (w0 <= one) else zero
+                    gw1 = gw1 if (w1 >= zero) & (w1 <= one) else zero
+                    gw2 = gw2 if (w2 >= zero) & (w2 <= one) else zero
+                    acc[6 * LANES + lane] += gw0 * px
+                    acc[7 * LANES + lane] += gw0 * py
+                    acc[8 * LANES + lane] += gw0
+                    acc[9 * LANES + lane] += gw1 * px
+                    acc[10 * LANES + lane] += gw1 * py
+                    acc[11 * LANES + lane] += gw1
+                    acc[12 * LANES + lane] += gw2 * px
+                    acc[13 * LANES + lane] += gw2 * py
+                    acc[14 * LANES + lane] += gw2
+                    acc[18 * LANES + lane] += g0[q] * wf
+                    acc[19 * LANES + lane] += g1[q] * wf
+                    acc[20 * LANES + lane] += g2[q] * wf
+        for j in range(N_GRAD):
+            b = j * LANES
+            grad[entry, j] = ((acc[b] + acc[b + 4]) + (acc[b + 2] + acc[b + 6])) + (
+                (acc[b + 1] + acc[b + 5]) + (acc[b + 3] + acc[b + 7])
+            )
+
+
+@njit(parallel=True, **_OPTS)
+def _backward(
+    order, n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col, px_tab, py_tab, K,
+    image, g_image, g_alpha, st_m, st_s, st_p, grad,
+):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    for k in prange(order.shape[0]):
+        old = ftz_on()
+        _backward_tile(
+            order[k], n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col,
+            px_tab, py_tab, K, image, g_image, g_alpha, st_m, st_s, st_p, grad,
+        )
+        ftz_restore(old)
+
+
+@njit(parallel=True, **_OPTS)
+def _sum_entries(grad: np.ndarray, face_start: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
+    """out[f] = sum of face f's entry slots, in entry order (deterministic)."""
+    for f in prange(out.shape[0]):
+        for j in range(N_GRAD):
+            out[f, j] = 0
+        for e in range(face_start[f], face_start[f + 1]):
+            for j in range(N_GRAD):
+                out[f, j] += grad[e, j]
+
+
+# --------------------------------------------------------------------------- torch glue
+
+
+@dataclass(frozen=True)
+class _Config:
+    size: int
+    sigma: float
+    gamma: float
+    background: tuple[float, float, float]
+    near: float
+    far: float
+    eps: float
+    dist_eps: float
+
+    def constants(self, dtype: np.dtype) -> np.ndarray:
+        k = np.zeros(N_K, dtype)
+        k[K_THR] = distance_threshold(self.sigma, self.dist_eps)
+        k[K_INV_SIGMA] = 1.0 / self.sigma
+        k[K_NEAR], k[K_FAR] = self.near, self.far
+        k[K_INV_FR] = 1.0 / (self.far - self.near)
+        k[K_INV_GAMMA] = 1.0 / self.gamma
+        k[K_EPS] = self.eps
+        k[K_SUM0] = math.exp(self.eps / self.gamma)
+        k[K_BG:K_BG + 3] = self.background
+        k[K_WSUM] = WSUM_EPS
+        k[K_EE_MIN] = 1e-30
+        k[K_ONE] = 1.0  # typed constants: a bare 0 or 1 would promote float32 math to float64
+        return k
+
+
+@dataclass
+class _Bins:
+    """The tiling of one forward call (reused by its backward)."""
+
+    box: np.ndarray
+    n_tx: int
+    wp: int
+    order: np.ndarray
+    tile_start: np.ndarray
+    tile_entry: np.ndarray
+    entry_face: np.ndarray
+    face_start: np.ndarray
+    px_tab: np.ndarray
+    py_tab: np.ndarray
+
+
+def _make_bins(cxy: np.ndarray, cfg: _Config) -> _Bins:
+    s = cfg.size
+    radius = math.sqrt(distance_threshold(cfg.sigma, cfg.dist_eps))
+    box = _face_boxes(cxy, radius, s)
+    n_ty, n_tx = -(-s // TILE_H), -(-s // TILE_W)
+    tile_start, tile_entry, entry_face, face_start = _bin_faces(box, n_ty, n_tx)
+    # every tile is rendered (empty ones get the background); busiest first, so
+    # the dynamic schedule ends with small tiles and the threads finish together
+    order = np.argsort(-np.diff(tile_start), kind="stable").astype(np.int64)
+    hp, wp = n_ty * TILE_H, n_tx * TILE_W
+    k = np.arange(max(hp, wp), dtype=np.float64)
+    px_tab = ((2 * k[:wp] + 1) / s - 1).astype(cxy.dtype)
+    py_tab = (1 - (2 * k[:hp] + 1) / s).astype(cxy.dtype)
+    return _Bins(box, n_tx, wp, order, tile_start, tile_entry, entry_face, face_start, px_tab, py_tab)
+
+
+def _numpy(t: "torch.Tensor") -> np.ndarray:
+    return t.detach().contiguous().numpy()
+
+
+def _make_function():  # type: ignore[no-untyped-def]
+    import torch
+    from torch.autograd.function import once_differentiable
+
+    class SoftRasterizeNumba(torch.autograd.Function):
+        """Autograd wrapper of the kernels: (cxy, inv, iz, colors) -> (image, alpha)."""
+
+        @staticmethod
+        def forward(ctx, cxy, inv, iz, colors, cfg):  # type: ignore[no-untyped-def]
+            a_cxy, a_inv, a_iz, a_col = _numpy(cxy), _numpy(inv), _numpy(iz), _numpy(colors)
+            dtype = a_cxy.dtype
+            bins = _make_bins(a_cxy, cfg)
+            s = cfg.size
+            K = cfg.constants(dtype)
+            image = np.empty((s, s, 3), dtype)
+            alpha = np.empty((s, s), dtype)
+            n_state = bins.py_tab.shape[0] * bins.wp
+            st_m = np.empty(n_state, dtype)
+            st_s = np.empty(n_state, dtype)
+            st_p = np.empty(n_state, dtype)
+            _forward(
+                bins.order, bins.n_tx, s, bins.wp, bins.tile_start, bins.tile_entry, bins.entry_face,
+                bins.box, a_cxy, a_inv, a_iz, a_col, bins.px_tab, bins.py_tab, K,
+                image, alpha, st_m, st_s, st_p,
+            )
+            ctx.cfg = cfg
+            ctx.torch_dtype = cxy.dtype
+            ctx.arrays = (a_cxy, a_inv, a_iz, a_col, K, bins, image, st_m, st_s, st_p)
+            out_image, out_alpha = torch.from_numpy(image), torch.from_numpy(alpha)
+            return out_image, out_alpha
+
+        @staticmethod
+        @once_differentiable
+        def backward(ctx, g_image, g_alpha):  # type: ignore[no-untyped-def]
+            a_cxy, a_inv, a_iz, a_col, K, bins, image, st_m, st_s, st_p = ctx.arrays
+            cfg = ctx.cfg
+            dtype = a_cxy.dtype
+            tdtype = cxy_dtype = ctx.torch_dtype
+            gi = np.zeros_like(image) if g_image is None else _numpy(g_image.to(tdtype))
+            ga = np.zeros(image.shape[:2], dtype) if g_alpha is None else _numpy(g_alpha.to(cxy_dtype))
+            grad = np.empty((bins.tile_entry.shape[0], N_GRAD), dtype)
+            _backward(
+                bins.order, bins.n_tx, cfg.size, bins.wp, bins.tile_start, bins.tile_entry, bins.entry_face,
+                bins.box, a_cxy, a_inv, a_iz, a_col, bins.px_tab, bins.py_tab, K,
+                image, gi, ga, st_m, st_s, st_p, grad,
+            )
+            face = np.empty((a_cxy.shape[0], N_GRAD), dtype)
+            _sum_entries(grad, bins.face_start, face)
+            face_t = torch.from_numpy(face)
+            return (
+                face_t[:, 0:6].contiguous(),
+                face_t[:, 6:15].contiguous(),
+                face_t[:, 15:18].contiguous(),
+                face_t[:, 18:21].contiguous(),
+                None,
+            )
+
+    return SoftRasterizeNumba
+
+
+_FUNCTION = None
+
+
+def _function():  # type: ignore[no-untyped-def]
+    global _FUNCTION
+    if _FUNCTION is None:
+        _FUNCTION = _make_function()
+    return _FUNCTION
+
+
+def face_inputs(vertices: "torch.Tensor", faces: "torch.Tensor", camera: "Camera"):  # type: ignore[no-untyped-def]
+    """Per-face kernel inputs with autograd: corners (F, 6) NDC xy, SoftRas's
+    barycentric matrix (F, 9), inverse corner depths (F, 3) in 1/model units."""
+    import torch
+
+    proj = camera.project_torch(vertices)
+    fv = proj[faces]  # (F, 3, 3)
+    x0, x1, x2 = fv[:, 0, 0], fv[:, 1, 0], fv[:, 2, 0]
+    y0, y1, y2 = fv[:, 0, 1], fv[:, 1, 1], fv[:, 2, 1]
+    det = x2 * (y0 - y1) + x0 * (y1 - y2) + x1 * (y2 - y0)
+    det = torch.where(det > 0, det.clamp_min(DET_EPS), det.clamp_max(-DET_EPS))
+    inv = torch.stack(
+        [
+            y1 - y2, x2 - x1, x1 * y2 - x2 * y1,
+            y2 - y0, x0 - x2, x2 * y0 - x0 * y2,
+            y0 - y1, x1 - x0, x0 * y1 - x1 * y0,
+        ],
+        dim=1,
+    ) / det[:, None]
+    cxy = fv[..., :2].reshape(-1, 6)
+    iz = 1.0 / fv[..., 2]
+    return cxy, inv, iz
+
+
+def soft_rasterize_numba(
+    vertices: "torch.Tensor",
+    faces: "torch.Tensor",
+    face_colors: "torch.Tensor",
+    camera: "Camera",
+    *,
+    sigma: float,
+    gamma: float,
+    background: tuple[float, float, float],
+    near: float,
+    far: float,
+    eps: float,
+    dist_eps: float,
+) -> "tuple[torch.Tensor, torch.Tensor]":
+    """The numba backend of :func:`saucerfab.render.soft_rasterize` (arguments checked there).
+
+    Args:
+        vertices: World positions, shape [V, 3], model units, CPU.
+        faces: Vertex indices, shape [F, 3], int64.
+        face_colors: RGB per face, shape [F, 3], same dtype as ``vertices``.
+        camera: The view (S = ``camera.image_size``).
+        sigma, gamma, background, near, far, eps, dist_eps: As
+            :func:`saucerfab.render.soft_rasterize`.
+
+    Returns:
+        ``(image, alpha)``: shapes [S, S, 3] and [S, S], ``vertices.dtype``.
+    """
+    cxy, inv, iz = face_inputs(vertices, faces, camera)
+    cfg = _Config(camera.image_size, sigma, gamma, background, near, far, eps, dist_eps)
+    return _function().apply(cxy, inv, iz, face_colors, cfg)

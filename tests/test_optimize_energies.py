@@ -1,0 +1,142 @@
+"""Energies, prox and the DR solver against hand computations (paper eq. 2-15)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from saucerfab.heightfield import laplacian
+from saucerfab.optimize.energies import DeformEnergy, e_barrier, e_sparse, e_visual, feasible, prox_l1
+from saucerfab.optimize.solver import ProxSettings, SolverSettings, solve
+
+
+def test_e_visual_is_sum_of_squares_over_views() -> None:
+    a = torch.zeros(2, 2, 3)
+    b = torch.zeros(2, 2, 3)
+    b[0, 0, 0] = 0.5  # 0.25
+    c = torch.ones(2, 2, 3)
+    d = torch.ones(2, 2, 3)
+    d[1, 1] = 0.0  # 3 channels * 1 = 3
+    assert float(e_visual([a, c], [b, d])) == pytest.approx(3.25)
+
+
+def test_e_deform_hand_computed_on_3x3() -> None:
+    # n = 3: the centre vertex (index 4) has 6 mesh neighbours: 1, 3, 5, 7 and
+    # the diagonal 0 and 8 (cells split from (i, j) to (i+1, j+1)).
+    lap = laplacian(3)
+    z = torch.zeros(9, dtype=torch.float64)
+    h = torch.zeros(9, dtype=torch.float64)
+    h[4] = 0.6
+    E = DeformEnergy(lap, z)
+    lh = E.apply(h).numpy()
+    # (L h)_4 = 0.6 - 0 = 0.6; each neighbour j of 4 gets -0.6 / deg(j)
+    assert lh[4] == pytest.approx(0.6)
+    degs = np.asarray((lap != 0).sum(axis=1)).ravel() - 1
+    expect = 0.6**2 + sum((0.6 / degs[j]) ** 2 for j in (0, 1, 3, 5, 7, 8))
+    assert float(E(h)) == pytest.approx(expect)
+    # heights shifted by a constant cost nothing
+    assert float(E(z + 0.3)) == pytest.approx(0.0, abs=1e-24)
+
+
+def test_barrier_matches_eq5_and_is_infinite_outside() -> None:
+    z = torch.tensor([0.0, 0.1], dtype=torch.float64)
+    h = torch.tensor([0.01, 0.1], dtype=torch.float64)
+    c = torch.tensor([[0.5, 0.25, 0.75]], dtype=torch.float64)
+    d = 0.05
+    expect = 0.0
+    for zi, hi in zip(z.tolist(), h.tolist()):
+        expect += -math.log(d - (zi - hi)) - math.log(d + (zi - hi))
+    for ci in c.reshape(-1).tolist():
+        expect += -math.log(ci) - math.log(1 - ci)
+    assert float(e_barrier(h, z, c, d)) == pytest.approx(expect)
+    assert math.isinf(float(e_barrier(h + 0.06, z, c, d)))
+    assert math.isinf(float(e_barrier(h, z, c * 0 + 1.0, d)))
+    assert feasible(h, z, c, d) and not feasible(h + 0.06, z, c, d)
+
+
+def test_e_sparse_and_prox_closed_form() -> None:
+    he = torch.tensor([0.0, 1.0, 2.0, -1.0])
+    x = torch.tensor([0.5, 1.05, 1.7, -1.0])
+    assert float(e_sparse(x, he)) == pytest.approx(0.5 + 0.05 + 0.3)
+    # lam * alpha = 0.1: shrink by 0.1 towards h^e, zero inside the band
+    p = prox_l1(x, he, 0.1)
+    assert torch.allclose(p, torch.tensor([0.4, 1.0, 1.8, -1.0]))
+    # prox is the minimiser of eq. 14: check against a brute-force grid
+    lam, alpha = 0.5, 0.2
+    for xi, ci in [(0.3, 0.0), (-0.05, 0.0), (0.7, 0.5)]:
+        grid = np.linspace(-1, 2, 300001)
+        f = lam * np.abs(grid - ci) + (grid - xi) ** 2 / (2 * alpha)
+        best = grid[np.argmin(f)]
+        got = float(prox_l1(torch.tensor([xi]), torch.tensor([ci]), lam * alpha))
+        assert got == pytest.approx(best, abs=1e-4)
+
+
+def _quadratic_problem(n: int = 16, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    target_h = torch.rand(n, generator=g, dtype=torch.float64) * 0.2 - 0.1  # some beyond delta
+    target_c = torch.rand(n, 3, generator=g, dtype=torch.float64)
+
+    def objective(h: torch.Tensor, c: torch.Tensor):
+        # the pipeline's shape: a data term plus the barrier of eq. 5
+        e = 50 * ((h - target_h) ** 2).sum() + ((c - target_c) ** 2).sum()
+        e = e + 1e-4 * e_barrier(h, torch.zeros_like(h), c, 0.05)
+        return e, {"E_visual": float(e.detach())}
+
+    return objective, target_h, target_c
+
+
+def test_solver_keeps_every_iterate_strictly_feasible() -> None:
+    objective, target_h, _ = _quadratic_problem()
+    z = torch.zeros_like(target_h)
+    c0 = torch.full((target_h.shape[0], 3), 0.5, dtype=torch.float64)
+    seen = []
+
+    def cb(it, total, parts):  # noqa: ANN001
+        seen.append(total)
+
+    delta = 0.05
+    res = solve(objective, z.clone(), c0, z, delta, SolverSettings(max_iters=300, lr_h=0.01, lr_c=0.05), callback=cb)
+    assert feasible(res.h, z, res.c, delta)
+    assert (res.h - z).abs().max() < delta
+    # the energy never goes up (Armijo) and the unconstrained targets are approached
+    assert all(b <= a + 1e-12 for a, b in zip(seen, seen[1:]))
+    best = float(50 * ((target_h.clamp(-delta, delta) - target_h) ** 2).sum())
+    assert seen[-1] - best < 0.1 * (seen[0] - best)
+    inside = target_h.abs() < delta * 0.8
+    assert torch.allclose(res.h[inside], target_h[inside], atol=1e-2)
+    # targets beyond the bound push the heights against it, never past
+    outside = target_h.abs() > delta
+    assert ((res.h[outside] - z[outside]).abs() > 0.8 * delta).all()
+
+
+def test_solver_rejects_infeasible_start() -> None:
+    objective, target_h, _ = _quadratic_problem()
+    z = torch.zeros_like(target_h)
+    c0 = torch.full((target_h.shape[0], 3), 0.5, dtype=torch.float64)
+    with pytest.raises(ValueError):
+        solve(objective, z + 1.0, c0, z, 0.05, SolverSettings(max_iters=5))
+
+
+def test_proximal_stage_moves_few_vertices() -> None:
+    # Only two vertices feel a strong pull; the L1 term keeps the rest at h^e.
+    n = 12
+    pull = torch.zeros(n, dtype=torch.float64)
+    pull[3], pull[7] = 1.0, -1.0
+
+    def objective(h: torch.Tensor, c: torch.Tensor):
+        e = -(pull * h).sum() * 20 + 0.01 * (h**2).sum() + ((c - 0.5) ** 2).sum()
+        return e, {"E_visual": float(e.detach())}
+
+    z = torch.zeros(n, dtype=torch.float64)
+    c0 = torch.full((n, 3), 0.5, dtype=torch.float64)
+    res = solve(
+        objective, z.clone(), c0, z, 0.05, SolverSettings(max_iters=200, lr_h=0.01),
+        prox=ProxSettings(center=z.clone(), lam=1.0, alpha=1.0),
+    )
+    moved = (res.h - z).abs() > 1e-9
+    assert moved[3] and moved[7]
+    assert int(moved.sum()) == 2
+    assert res.h[3] > 0.02 and res.h[7] < -0.02

@@ -1,0 +1,81 @@
+"""Texturing (paper 3.4.2): the four face cases, UVs from projections, the both-case average."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from saucerfab.design import FaceView
+from saucerfab.heightfield import base_shape
+from saucerfab.optimize.texturing import classify_faces, raster_triangles_2d, texture_saucer
+from saucerfab.optimize.views import Rig
+from saucerfab.scene import Scene
+
+
+def test_classify_faces_truth_table() -> None:
+    d = np.array([True, True, False, False])
+    r = np.array([True, False, True, False])
+    got = classify_faces({"direct": d, "reflected": r})
+    assert list(got) == [FaceView.BOTH, FaceView.DIRECT, FaceView.REFLECTED, FaceView.NEITHER]
+    # a second reflected view counts as reflected too
+    got2 = classify_faces({"direct": d, "reflected": np.zeros(4, bool), "reflected2": r})
+    assert list(got2) == list(got)
+
+
+def test_raster_triangles_2d_covers_texel_centres_exactly() -> None:
+    # right triangle with legs 4 texels: centres (x+.5, y+.5) with x + y + 1 <= 4
+    tri = np.array([[[0.0, 0.0], [4.0, 0.0], [0.0, 4.0]]])
+    pix, ti, bary = raster_triangles_2d(tri, 8, 8)
+    got = {(p % 8, p // 8) for p in pix}
+    want = {(x, y) for x in range(8) for y in range(8) if (x + 0.5) + (y + 0.5) <= 4.0}
+    assert got == want
+    assert (ti == 0).all()
+    pos = np.einsum("kc,kcd->kd", bary, tri[ti])
+    cx = np.array([p % 8 for p in pix]) + 0.5
+    cy = np.array([p // 8 for p in pix]) + 0.5
+    assert np.allclose(pos, np.stack([cx, cy], 1))
+
+
+@pytest.fixture(scope="module")
+def small_rig():
+    scene = Scene()
+    scene = replace(scene, saucer=replace(scene.saucer, resolution=24))
+    base = base_shape("waves", 24)
+    return scene, base, Rig(scene, base, image_size=96)
+
+
+def test_four_cases_uvs_and_both_average(small_rig) -> None:  # noqa: ANN001
+    scene, base, rig = small_rig
+    t = 64
+    red = np.zeros((t, t, 3))
+    red[..., 0] = 1.0
+    blue = np.zeros((t, t, 3))
+    blue[..., 2] = 1.0
+    res = texture_saucer(rig, base, {"direct": red, "reflected": blue})
+    fv = res.face_view
+    for case in FaceView:
+        assert (fv == case).any(), f"no face in case {case.name}: the scene should produce all four"
+    assert res.texture.shape == (t, 2 * t, 3)
+    u = res.face_uvs[..., 0]
+    # direct-only (and neither) faces sample the left panel, reflected and both the right
+    assert (u[(fv == FaceView.DIRECT) | (fv == FaceView.NEITHER)] <= 0.5 + 1e-6).all()
+    assert (u[(fv == FaceView.REFLECTED) | (fv == FaceView.BOTH)] >= 0.5 - 1e-6).all()
+    # UVs are the projections: a direct face's corners map back to its NDC
+    direct = rig.view("direct")
+    ndc = direct.camera.project(direct.vertices_np(base.reshape(-1)))[:, :2]
+    f = int(np.flatnonzero(fv == FaceView.DIRECT)[0])
+    corners = ndc[rig.faces_np[f]]
+    expect_u = np.clip((corners[:, 0] + 1) / 2, 0, 1) / 2
+    expect_v = np.clip((corners[:, 1] + 1) / 2, 0, 1)
+    assert np.allclose(res.face_uvs[f, :, 0], expect_u, atol=1e-6)
+    assert np.allclose(res.face_uvs[f, :, 1], expect_v, atol=1e-6)
+    # the reflected panel: purple (average of red and blue) under both-faces, blue elsewhere
+    right = res.texture[:, t:].reshape(-1, 3).astype(int)
+    purple = (np.abs(right - [128, 0, 128]).max(axis=1) <= 1)
+    pure_blue = (right == [0, 0, 255]).all(axis=1)
+    assert purple.any() and pure_blue.any()
+    assert (purple | pure_blue).all()
+    # the direct panel is untouched
+    assert (res.texture[:, :t] == [255, 0, 0]).all()
