@@ -5,8 +5,9 @@
 1. ``saucerfab design`` with ``samples/direct_heart.png`` on the saucer and
    ``samples/reflected_star.png`` in the cup, on the ``waves`` base shape,
    at the paper's full size (150 x 150, 512 x 512) unless ``--quick``;
-2. ``saucerfab export`` of that design for the Stratasys J55 at an 80 mm cup,
-   as 3MF, OBJ (zipped), GLB, PLY and VRML;
+2. ``saucerfab export`` of that design for the Stratasys J55 at an 80 mm cup
+   as 3MF, OBJ, PLY and VRML (the formats GrabCAD Print takes), and for a
+   generic bureau as GLB (a web-viewable copy);
 3. ``saucerfab check`` of every written file.
 
 Each step is the CLI itself, called in-process, so the demo shows exactly
@@ -48,8 +49,15 @@ def run(argv: list[str] | None = None) -> int:
             "export", str(out / "design"),
             "--printer", "j55",
             "--cup-diameter-mm", "80",
-            "--formats", "3mf,obj,glb,ply,wrl",
+            "--formats", "3mf,obj,ply,wrl",
             "--out", str(out / "print"),
+        ],
+        [
+            "export", str(out / "design"),
+            "--printer", "bureau",
+            "--cup-diameter-mm", "80",
+            "--formats", "glb",
+            "--out", str(out / "web"),
         ],
     ]
     t0 = time.perf_counter()
@@ -60,7 +68,10 @@ def run(argv: list[str] | None = None) -> int:
             print(f"demo: step 'saucerfab {step[0]}' failed with exit code {rc}", file=sys.stderr)
             return rc
     files = sorted(
-        str(f) for f in (out / "print").rglob("*") if f.suffix.lower() in (".3mf", ".glb", ".ply", ".wrl", ".obj")
+        str(f)
+        for folder in ("print", "web")
+        for f in (out / folder).rglob("*")
+        if f.suffix.lower() in (".3mf", ".glb", ".ply", ".wrl", ".obj")
     )
     print("$ saucerfab check " + " ".join(files), flush=True)
     rc = cli(["check", *files, "--printer", "j55"])

@@ -184,6 +184,10 @@ def save_design(
     for name, data in (previews or {}).items():
         files[f"previews/{name}"] = data
     files.update(extra_files or {})
+    for rel in files:
+        parts = Path(rel).parts
+        if Path(rel).is_absolute() or ".." in parts or not parts:
+            raise ValueError(f"design file name {rel!r} must be a relative path inside the folder")
     meta = design_json(design)
     meta["file_sha256"] = {k: hashlib.sha256(v).hexdigest() for k, v in sorted(files.items())}
     files["design.json"] = (json.dumps(meta, indent=2, sort_keys=True) + "\n").encode()

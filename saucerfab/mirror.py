@@ -513,9 +513,8 @@ def reflect_prism(
         dq = (q - v0) @ n
         r = q - 2.0 * dq[:, None] * n
         # T = P + s (R - P) on the facet line: dp + s (dr - dp) = 0, dr = -dq
-        s = dp / (dp + dq)
         front = dq > 0
-        s = np.where(front, s, 1.0)
+        s = np.where(front, dp / np.where(front, dp + dq, 1.0), 1.0)
         t = p + s[:, None] * (r - p)
         lam = ((t - v0) @ e) / float(e @ e)
         within = (lam >= 0.0) & (lam <= 1.0)

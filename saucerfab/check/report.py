@@ -66,7 +66,7 @@ CODES: dict[str, tuple[str, str]] = {
     "archive_too_large": ("unreadable", "an archive over the entry-count or uncompressed-size limit (zip bomb)"),
     "over_check_limit": ("unreadable", "over one of the checker's limits (Limits); the message names it"),
     "no_triangles": ("unreadable", "the file holds no triangles"),
-    "reader_failed": ("unreadable", "an unexpected failure while reading (a checker bug; please report)"),
+    "internal_error": ("unreadable", "an unexpected failure inside the checker (a bug: please report it with the file)"),
     # -- geometry (errors)
     "non_finite": ("error", "NaN or infinite coordinates"),
     "degenerate_faces": ("error", "faces with a repeated vertex or zero area"),

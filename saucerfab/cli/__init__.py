@@ -97,6 +97,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SaucerfabError as exc:
         print(f"saucerfab {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except OSError as exc:  # a bad output path, a full disk, no permission
+        where = f" ({exc.filename})" if getattr(exc, "filename", None) else ""
+        print(f"saucerfab {args.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"saucerfab {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -76,7 +76,9 @@ def model_xml(mesh: TexturedMesh, texture_path: str) -> str:
     )
     out.extend(fmt_rows(mesh.vertices, mesh.decimals, template='     <vertex x="{}" y="{}" z="{}"/>\n'))
     out.append("    </vertices>\n    <triangles>\n")
-    tri = '     <triangle v1="{}" v2="{}" v3="{}" p1="{}" p2="{}" p3="{}"/>\n'
+    # pid on every triangle: the spec lets it default to the object's, but
+    # lib3mf (and so GrabCAD-era readers built on it) then ignore p1..p3
+    tri = f'     <triangle v1="{{}}" v2="{{}}" v3="{{}}" pid="{group_id}" p1="{{}}" p2="{{}}" p3="{{}}"/>\n'
     rows = [(*f, *t) for f, t in zip(mesh.faces.tolist(), mesh.face_uvs.tolist())]
     out.extend(tri.format(*r) for r in rows)
     out.append("    </triangles>\n   </mesh>\n  </object>\n </resources>\n")

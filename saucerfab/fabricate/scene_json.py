@@ -101,6 +101,17 @@ def scene_dict(scene: Scene, solid: Solid) -> dict[str, Any]:
     }
 
 
+def _dumps(obj: Any, indent: str = "") -> str:
+    """JSON with one line per key and number lists kept on one line (readable matrices)."""
+    inner = indent + "  "
+    if isinstance(obj, dict):
+        items = [f"{inner}{json.dumps(k)}: {_dumps(v, inner)}" for k, v in obj.items()]
+        return "{\n" + ",\n".join(items) + "\n" + indent + "}"
+    if isinstance(obj, list) and any(isinstance(v, (dict, list)) for v in obj):
+        return "[\n" + ",\n".join(inner + _dumps(v, inner) for v in obj) + "\n" + indent + "]"
+    return json.dumps(obj)
+
+
 def scene_json_bytes(scene: Scene, solid: Solid) -> bytes:
-    """``scene.json`` as UTF-8 bytes (sorted keys off: the schema's order reads best)."""
-    return (json.dumps(scene_dict(scene, solid), indent=2) + "\n").encode("utf-8")
+    """``scene.json`` as UTF-8 bytes (keys in the schema's order)."""
+    return (_dumps(scene_dict(scene, solid)) + "\n").encode("utf-8")

@@ -37,22 +37,33 @@ def e_visual(rendered: list[torch.Tensor], targets: list[torch.Tensor]) -> torch
 class DeformEnergy:
     """E_deform(h) = ||L z - L h||^2 with a fixed sparse Laplacian (eq. 3).
 
+    The Laplacian's rows are short (a vertex and its <= 6 mesh neighbours),
+    so ``L h`` is a gather over a padded (V, K) neighbour table and a weighted
+    sum: differentiable, deterministic, and free of torch's beta sparse API.
+
     Args:
         lap: scipy sparse (V, V) Laplacian.
         base: (V,) base heights z.
     """
 
     def __init__(self, lap, base: torch.Tensor) -> None:  # type: ignore[no-untyped-def]
-        coo = lap.tocoo()
-        idx = torch.as_tensor(np.vstack([coo.row, coo.col]), dtype=torch.int64)
-        self.L = torch.sparse_coo_tensor(
-            idx, torch.as_tensor(coo.data, dtype=base.dtype), coo.shape
-        ).coalesce().to_sparse_csr()
+        csr = lap.tocsr()
+        counts = np.diff(csr.indptr)
+        k = int(counts.max())
+        v = csr.shape[0]
+        idx = np.tile(np.arange(v)[:, None], (1, k))  # padding points at the row itself...
+        wts = np.zeros((v, k))  # ...with weight 0
+        for r in range(k):
+            has = counts > r
+            idx[has, r] = csr.indices[csr.indptr[:-1][has] + r]
+            wts[has, r] = csr.data[csr.indptr[:-1][has] + r]
+        self.idx = torch.as_tensor(idx, dtype=torch.int64)
+        self.wts = torch.as_tensor(wts, dtype=base.dtype)
         self.lz = self.apply(base.detach())
 
     def apply(self, h: torch.Tensor) -> torch.Tensor:
         """L h for (V,) h."""
-        return (self.L @ h.unsqueeze(1)).squeeze(1)
+        return (h[self.idx] * self.wts.to(h.dtype)).sum(dim=1)
 
     def __call__(self, h: torch.Tensor) -> torch.Tensor:
         return ((self.lz - self.apply(h)) ** 2).sum()
@@ -72,6 +83,11 @@ def e_barrier(h: torch.Tensor, z: torch.Tensor, c: torch.Tensor, delta: float) -
             return h.new_tensor(float("inf"))
         total = total - torch.log(p).sum()
     return total
+
+
+def barrier_floor(num_vertices: int, num_faces: int, delta: float) -> float:
+    """The smallest value of E_barrier: all h at z, all colours at 0.5 (eq. 5)."""
+    return -2.0 * num_vertices * np.log(delta) - 6.0 * num_faces * np.log(0.5)
 
 
 def e_sparse(h: torch.Tensor, h_e: torch.Tensor) -> torch.Tensor:

@@ -136,7 +136,7 @@ def prepare(request: DesignRequest) -> Prepared:
     else:
         e = im.solid_colour_targets([masks[k] for k in names])
         enhanced = dict(zip(names, e))
-        from saucerfab.optimize.regions import split_reflected_facets
+        from saucerfab.mirror import split_reflected_facets
 
         groups = split_reflected_facets(scene, base)
     return Prepared(scene, base, render, texture, enhanced, masks, inputs, groups)
@@ -230,7 +230,7 @@ def run_design(
     import torch
 
     from saucerfab.heightfield import laplacian
-    from saucerfab.optimize.energies import DeformEnergy, e_barrier, e_visual
+    from saucerfab.optimize.energies import DeformEnergy, barrier_floor, e_barrier, e_visual
     from saucerfab.optimize.solver import ProxSettings, SolverSettings, solve
     from saucerfab.optimize.targets import blur_matched_targets, compatibility
     from saucerfab.optimize.texturing import texture_saucer, visible_faces
@@ -307,7 +307,7 @@ def run_design(
             ed = deform(hh)
             eb = e_barrier(hh, z, cc, delta)
             total = ev + _w * ed + eb
-            return total, {"E_visual": float(ev), "E_deform": float(ed), "E_barrier": float(eb)}
+            return total, {"E_visual": float(ev.detach()), "E_deform": float(ed.detach()), "E_barrier": float(eb.detach())}
 
         stage_t0 = time.perf_counter()
         last = [0.0]
@@ -319,7 +319,11 @@ def run_design(
                 last[0] = now
                 progress(_name, it, request.max_iters, parts, now - stage_t0)
 
-        settings = SolverSettings(max_iters=request.max_iters, lr_h=delta / 20)
+        settings = SolverSettings(
+            max_iters=request.max_iters,
+            lr_h=delta / 20,
+            energy_floor=barrier_floor(rig.num_vertices, rig.num_faces, delta),
+        )
         try:
             res = solve(objective, h, c, z, delta, settings, prox=prox, callback=cb)
         except KeyboardInterrupt:

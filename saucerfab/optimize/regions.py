@@ -17,8 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from saucerfab.errors import ConfigError
-from saucerfab.mirror import prism_facets, visible_region
-from saucerfab.render.camera import Camera
+from saucerfab.mirror import facet_groups_overlap, split_reflected_facets
 from saucerfab.scene import PrismCup, Scene
 
 
@@ -44,48 +43,12 @@ class RegionReport:
         }
 
 
-def facet_groups(scene: Scene) -> tuple[tuple[int, ...], tuple[int, ...]]:
-    """The camera-facing facets of a prism cup, split into the viewer's left and right.
-
-    A facet belongs to the side its outward normal points to, measured along
-    the direct camera's right axis; a facet that faces the camera squarely
-    (normal within 1e-6 of the view plane) belongs to neither, since it would
-    show the same central strip of the saucer to both images.
-    """
-    cup = scene.cup
-    if not isinstance(cup, PrismCup):
-        raise ConfigError(
-            f"two reflected images need a prism cup (e.g. --cup prism:6); got a {cup.kind} cup"
-        )
-    verts, _, normals = prism_facets(cup)
-    p = np.asarray(scene.camera[:2])
-    right = Camera.from_scene(scene, "direct").axes()[0][:2]
-    left_g, right_g = [], []
-    for k in range(cup.sides):
-        if float((p - verts[k]) @ normals[k]) <= 0:
-            continue  # the camera sees its back
-        side = float(normals[k] @ right)
-        if side < -1e-6:
-            left_g.append(k)
-        elif side > 1e-6:
-            right_g.append(k)
-    if not left_g or not right_g:
-        raise ConfigError(
-            f"the {cup.sides}-gon prism at rotation {cup.rotation_deg} deg shows the camera no facets on "
-            "one side; rotate it (see saucerfab.optimize.regions.placement_options)"
-        )
-    return tuple(left_g), tuple(right_g)
-
-
-def region_report(scene: Scene, heights: np.ndarray | None = None, n: int | None = None) -> RegionReport:
-    """Which saucer samples each facet group reflects, and their overlap."""
-    groups = facet_groups(scene)
-    regs = [visible_region(scene, n, heights, facets=list(g)) for g in groups]
-    a, b = regs
-    total = a.size
-    inter = float((a & b).sum())
-    smaller = max(min(int(a.sum()), int(b.sum())), 1)
-    return RegionReport(groups, (float(a.sum()) / total, float(b.sum()) / total), inter / smaller)
+def region_report(scene: Scene, heights: np.ndarray | None = None) -> RegionReport:
+    """The facet split of :func:`saucerfab.mirror.split_reflected_facets` and its overlap."""
+    groups = split_reflected_facets(scene, heights)
+    a, b, both = facet_groups_overlap(scene, groups, heights)
+    smaller = max(min(a, b), 1e-12)
+    return RegionReport((tuple(groups[0]), tuple(groups[1])), (a, b), both / smaller if min(a, b) > 0 else 1.0)
 
 
 def placement_options(scene: Scene) -> dict[str, PrismCup]:
@@ -110,7 +73,8 @@ def best_placement(
     """Measure both placements and return the scene with the one of least overlap.
 
     Among placements whose overlap is within 1 % of the best, the one whose
-    smaller region is larger wins (both images need room).
+    smaller region is larger wins (both images need room). A placement that
+    shows the saucer in fewer than two facets is skipped.
     """
     reports: dict[str, RegionReport] = {}
     scenes: dict[str, Scene] = {}
@@ -127,8 +91,3 @@ def best_placement(
     close = [k for k, r in reports.items() if r.overlap <= least + 0.01]
     pick = max(close, key=lambda k: min(reports[k].area_fraction))
     return scenes[pick], pick, reports
-
-
-def split_reflected_facets(scene: Scene, heights: np.ndarray) -> list[list[int]]:
-    """Facet groups of the two reflected images for the scene's prism as placed."""
-    return [list(g) for g in facet_groups(scene)]

@@ -56,6 +56,10 @@ class SolverSettings:
         max_backtracks: halvings of the step before giving up on a direction.
         armijo: sufficient-decrease constant.
         optimize_heights: False keeps h fixed (texture-only ablations).
+        energy_floor: subtracted from the energy before taking the relative
+            change (the barrier's minimum, a large constant: with 22,500
+            vertices and 44,402 faces it is about 3e5, dwarfing E_visual, so
+            a relative change of the raw energy would end a stage at once).
     """
 
     lr_h: float = 2.5e-3
@@ -69,6 +73,7 @@ class SolverSettings:
     max_backtracks: int = 6
     armijo: float = 1e-4
     optimize_heights: bool = True
+    energy_floor: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -218,7 +223,7 @@ def solve(
         hh, cc = e_try._saucerfab_inputs  # type: ignore[attr-defined]
         g_h = hh.grad if hh.grad is not None else torch.zeros_like(h)
         g_c = cc.grad if cc.grad is not None else torch.zeros_like(c)
-        rel = abs(total - tot_try) / max(abs(total), 1e-30)
+        rel = abs(total - tot_try) / max(abs(total - s.energy_floor), 1e-30)
         h, c, total, parts = h_try.detach(), c_try.detach(), tot_try, parts_try
         entry = {"iteration": float(it), "beta": beta, "time_s": time.perf_counter() - t0, **parts}
         log.append(entry)

@@ -11,6 +11,7 @@ torch and numba are imported only when a function that needs them is called.
 """
 
 from saucerfab.render.camera import Camera
+from saucerfab.render.hard import rasterize_hard, render_face_colors_hard, render_textured
 from saucerfab.render.soft import soft_rasterize
 
-__all__ = ["Camera", "soft_rasterize"]
+__all__ = ["Camera", "rasterize_hard", "render_face_colors_hard", "render_textured", "soft_rasterize"]

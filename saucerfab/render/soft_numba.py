@@ -50,6 +50,8 @@ LANES = 8
 #: tile size in pixels; TILE_W is a multiple of LANES so lane groups never leave a tile
 TILE_W = 32
 TILE_H = 16
+#: pixels per tile; the per-pixel state fields of a tile are NLOC apart in one array
+NLOC = TILE_H * TILE_W
 #: gradient slots per (face, tile): 6 corner xy, 9 barycentric matrix, 3 inverse depths, 3 colours
 N_GRAD = 21
 
@@ -146,24 +148,22 @@ def _forward_tile(
     """Render tile ``t``: write ``image``/``alpha`` and the backward's per-pixel state."""
     ty, tx = t // n_tx, t % n_tx
     rt0, ct0 = ty * TILE_H, tx * TILE_W
-    n_loc = TILE_H * TILE_W
     zero, one = K[K_ZERO], K[K_ONE]
     thr, inv_sigma, near, far = K[K_THR], K[K_INV_SIGMA], K[K_NEAR], K[K_FAR]
     inv_fr, inv_gamma, wsum_min, ee_min = K[K_INV_FR], K[K_INV_GAMMA], K[K_WSUM], K[K_EE_MIN]
-    m = np.empty(n_loc, K.dtype)
-    ssum = np.empty(n_loc, K.dtype)
-    cr = np.empty(n_loc, K.dtype)
-    cg = np.empty(n_loc, K.dtype)
-    cb = np.empty(n_loc, K.dtype)
-    pr = np.empty(n_loc, K.dtype)
+    # Per-pixel state, one field every NLOC entries of one array: LLVM sees
+    # constant distances between the fields and needs no runtime alias checks
+    # (separate arrays would need one per pair, more than it will emit).
+    # Fields: 0 running max, 1 running sum, 2-4 colour sums, 5 prod(1 - D).
+    st = np.empty(6 * NLOC, K.dtype)
     # SoftRas's start: running maximum eps, running sum exp(eps/gamma), colour bg * sum
-    for q in range(n_loc):
-        m[q] = K[K_EPS]
-        ssum[q] = K[K_SUM0]
-        cr[q] = K[K_BG] * K[K_SUM0]
-        cg[q] = K[K_BG + 1] * K[K_SUM0]
-        cb[q] = K[K_BG + 2] * K[K_SUM0]
-        pr[q] = one
+    for q in range(NLOC):
+        st[q] = K[K_EPS]
+        st[NLOC + q] = K[K_SUM0]
+        st[2 * NLOC + q] = K[K_BG] * K[K_SUM0]
+        st[3 * NLOC + q] = K[K_BG + 1] * K[K_SUM0]
+        st[4 * NLOC + q] = K[K_BG + 2] * K[K_SUM0]
+        st[5 * NLOC + q] = one
 
     for idx in range(tile_start[t], tile_start[t + 1]):
         f = entry_face[tile_entry[idx]]
@@ -184,81 +184,86 @@ def _forward_tile(
         i20, i21, i22 = inv[f, 6], inv[f, 7], inv[f, 8]
         iz0, iz1, iz2 = iz[f, 0], iz[f, 1], iz[f, 2]
         fr, fg, fb = col[f, 0], col[f, 1], col[f, 2]
+        # whole lane groups: pixels past the face's box fail the distance test
+        # exactly as pixels outside it do, and the loop has no remainder
         cs0 = ca - (ca % LANES)
+        cs1 = cbx + 1 + (-(cbx + 1)) % LANES
+        n = cs1 - cs0
+        pxv = px_tab[cs0:cs1]
         for r in range(ra, rb + 1):
             py = py_tab[r]
             b0 = i01 * py + i02
             b1 = i11 * py + i12
             b2 = i21 * py + i22
             hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
-            row = (r - rt0) * TILE_W - ct0
-            for cs in range(cs0, cbx + 1, LANES):
-                for lane in range(LANES):
-                    c = cs + lane
-                    q = row + c
-                    px = px_tab[c]
-                    w0 = i00 * px + b0
-                    w1 = i10 * px + b1
-                    w2 = i20 * px + b2
-                    inside = (w0 > zero) & (w0 < one) & (w1 > zero) & (w1 < one) & (w2 > zero) & (w2 < one)
-                    # squared distance to the closed triangle = nearest of the three segments
-                    hx = px - ax0
-                    tt = (hx * ex0 + hy0 * ey0) * ie0
-                    tt = min(max(tt, zero), one)
-                    dx, dy = tt * ex0 - hx, tt * ey0 - hy0
-                    d2 = dx * dx + dy * dy
-                    hx = px - ax1
-                    tt = (hx * ex1 + hy1 * ey1) * ie1
-                    tt = min(max(tt, zero), one)
-                    dx, dy = tt * ex1 - hx, tt * ey1 - hy1
-                    d2 = min(d2, dx * dx + dy * dy)
-                    hx = px - ax2
-                    tt = (hx * ex2 + hy2 * ey2) * ie2
-                    tt = min(max(tt, zero), one)
-                    dx, dy = tt * ex2 - hx, tt * ey2 - hy2
-                    d2 = min(d2, dx * dx + dy * dy)
-                    valid = inside | (d2 < thr)
-                    xs = (d2 if inside else -d2) * inv_sigma
-                    ex = vexp(-abs(xs))
-                    rec = one / (one + ex)
-                    erec = ex * rec
-                    cov = rec if xs >= zero else erec  # sigmoid(xs)
-                    unc = erec if xs >= zero else rec  # 1 - sigmoid(xs)
-                    pr[q] = pr[q] * (unc if valid else one)
-                    # perspective-correct depth from the clipped barycentrics
-                    wc0 = min(max(w0, zero), one)
-                    wc1 = min(max(w1, zero), one)
-                    wc2 = min(max(w2, zero), one)
-                    sw = max(wc0 + wc1 + wc2, wsum_min)
-                    zq = (wc0 * iz0 + wc1 * iz1 + wc2 * iz2) / sw
-                    z = one / zq
-                    rgb = valid & (z >= near) & (z <= far)
-                    zn = (far - z) * inv_fr
-                    # online softmax with SoftRas's running maximum, one exp per pair
-                    mo = m[q]
-                    dz = zn - mo
-                    e = vexp(-abs(dz) * inv_gamma)
-                    newmax = rgb & (dz > zero)
-                    scale = e if newmax else one
-                    term = (one if newmax else e) * cov
-                    term = term if rgb else zero
-                    m[q] = zn if newmax else mo
-                    ssum[q] = ssum[q] * scale + term
-                    cr[q] = cr[q] * scale + term * fr
-                    cg[q] = cg[q] * scale + term * fg
-                    cb[q] = cb[q] * scale + term * fb
+            o = (r - rt0) * TILE_W + cs0 - ct0
+            # a view indexed by the loop counter plus constants: no negative-index
+            # wraparound, so LLVM sees unit-stride accesses and vectorizes
+            sv = st[o:]
+            for lane in range(n):
+                px = pxv[lane]
+                w0 = i00 * px + b0
+                w1 = i10 * px + b1
+                w2 = i20 * px + b2
+                inside = (w0 > zero) & (w0 < one) & (w1 > zero) & (w1 < one) & (w2 > zero) & (w2 < one)
+                # squared distance to the closed triangle = nearest of the three segments
+                hx = px - ax0
+                tt = (hx * ex0 + hy0 * ey0) * ie0
+                tt = min(max(tt, zero), one)
+                dx, dy = tt * ex0 - hx, tt * ey0 - hy0
+                d2 = dx * dx + dy * dy
+                hx = px - ax1
+                tt = (hx * ex1 + hy1 * ey1) * ie1
+                tt = min(max(tt, zero), one)
+                dx, dy = tt * ex1 - hx, tt * ey1 - hy1
+                d2 = min(d2, dx * dx + dy * dy)
+                hx = px - ax2
+                tt = (hx * ex2 + hy2 * ey2) * ie2
+                tt = min(max(tt, zero), one)
+                dx, dy = tt * ex2 - hx, tt * ey2 - hy2
+                d2 = min(d2, dx * dx + dy * dy)
+                valid = inside | (d2 < thr)
+                xs = (d2 if inside else -d2) * inv_sigma
+                ex = vexp(-abs(xs))
+                rec = one / (one + ex)
+                erec = ex * rec
+                cov = rec if xs >= zero else erec  # sigmoid(xs)
+                unc = erec if xs >= zero else rec  # 1 - sigmoid(xs)
+                sv[5 * NLOC + lane] = sv[5 * NLOC + lane] * (unc if valid else one)
+                # perspective-correct depth from the clipped barycentrics
+                wc0 = min(max(w0, zero), one)
+                wc1 = min(max(w1, zero), one)
+                wc2 = min(max(w2, zero), one)
+                sw = max(wc0 + wc1 + wc2, wsum_min)
+                zq = (wc0 * iz0 + wc1 * iz1 + wc2 * iz2) / sw
+                z = one / zq
+                rgb = valid & (z >= near) & (z <= far)
+                zn = (far - z) * inv_fr
+                # online softmax with SoftRas's running maximum, one exp per pair
+                mo = sv[lane]
+                dz = zn - mo
+                e = vexp(-abs(dz) * inv_gamma)
+                newmax = rgb & (dz > zero)
+                scale = e if newmax else one
+                term = (one if newmax else e) * cov
+                term = term if rgb else zero
+                sv[lane] = zn if newmax else mo
+                sv[NLOC + lane] = sv[NLOC + lane] * scale + term
+                sv[2 * NLOC + lane] = sv[2 * NLOC + lane] * scale + term * fr
+                sv[3 * NLOC + lane] = sv[3 * NLOC + lane] * scale + term * fg
+                sv[4 * NLOC + lane] = sv[4 * NLOC + lane] * scale + term * fb
 
     for r in range(rt0, min(rt0 + TILE_H, size)):
         for c in range(ct0, min(ct0 + TILE_W, size)):
             q = (r - rt0) * TILE_W + (c - ct0)
             g = r * wp + c
-            image[r, c, 0] = cr[q] / ssum[q]
-            image[r, c, 1] = cg[q] / ssum[q]
-            image[r, c, 2] = cb[q] / ssum[q]
-            alpha[r, c] = one - pr[q]
-            st_m[g] = m[q]
-            st_s[g] = ssum[q]
-            st_p[g] = pr[q]
+            image[r, c, 0] = st[2 * NLOC + q] / st[NLOC + q]
+            image[r, c, 1] = st[3 * NLOC + q] / st[NLOC + q]
+            image[r, c, 2] = st[4 * NLOC + q] / st[NLOC + q]
+            alpha[r, c] = one - st[5 * NLOC + q]
+            st_m[g] = st[q]
+            st_s[g] = st[NLOC + q]
+            st_p[g] = st[5 * NLOC + q]
 
 
 @njit(parallel=True, **_OPTS)
@@ -286,30 +291,28 @@ def _backward_tile(
     """Gradients of tile ``t``'s pixels into the slots ``grad[entry]`` of its entries."""
     ty, tx = t // n_tx, t % n_tx
     rt0, ct0 = ty * TILE_H, tx * TILE_W
-    n_loc = TILE_H * TILE_W
     zero, one = K[K_ZERO], K[K_ONE]
     two = one + one
     thr, inv_sigma, near, far = K[K_THR], K[K_INV_SIGMA], K[K_NEAR], K[K_FAR]
     inv_fr, inv_gamma, wsum_min, ee_min = K[K_INV_FR], K[K_INV_GAMMA], K[K_WSUM], K[K_EE_MIN]
-    # per pixel: dL/dimage / sum (3), sum_k dL/dimage_k image_k / sum, dL/dalpha * prod(1 - D), max
-    g0 = np.zeros(n_loc, K.dtype)
-    g1 = np.zeros(n_loc, K.dtype)
-    g2 = np.zeros(n_loc, K.dtype)
-    gi = np.zeros(n_loc, K.dtype)
-    ap = np.zeros(n_loc, K.dtype)
-    m = np.zeros(n_loc, K.dtype)
+    # per pixel, one field every NLOC entries (see _forward_tile): 0 the softmax
+    # maximum, 1-3 dL/dimage / sum, 4 sum_k dL/dimage_k image_k / sum,
+    # 5 dL/dalpha * prod(1 - D)
+    st = np.zeros(6 * NLOC, K.dtype)
     for r in range(rt0, min(rt0 + TILE_H, size)):
         for c in range(ct0, min(ct0 + TILE_W, size)):
             q = (r - rt0) * TILE_W + (c - ct0)
             g = r * wp + c
             rs = one / st_s[g]
             a0, a1, a2 = g_image[r, c, 0] * rs, g_image[r, c, 1] * rs, g_image[r, c, 2] * rs
-            g0[q], g1[q], g2[q] = a0, a1, a2
-            gi[q] = a0 * image[r, c, 0] + a1 * image[r, c, 1] + a2 * image[r, c, 2]
-            ap[q] = g_alpha[r, c] * st_p[g]
-            m[q] = st_m[g]
+            st[q] = st_m[g]
+            st[NLOC + q], st[2 * NLOC + q], st[3 * NLOC + q] = a0, a1, a2
+            st[4 * NLOC + q] = a0 * image[r, c, 0] + a1 * image[r, c, 1] + a2 * image[r, c, 2]
+            st[5 * NLOC + q] = g_alpha[r, c] * st_p[g]
 
-    acc = np.zeros(N_GRAD * LANES, K.dtype)
+    # gradient accumulators per tile column (the sums over rows stay elementwise,
+    # so they vectorize without reassociation); reduced once per entry
+    acc = np.zeros(N_GRAD * TILE_W, K.dtype)
     for idx in range(tile_start[t], tile_start[t + 1]):
         entry = tile_entry[idx]
         f = entry_face[entry]
@@ -319,7 +322,12 @@ def _backward_tile(
             for j in range(N_GRAD):
                 grad[entry, j] = zero
             continue
+        cs0 = ca - (ca % LANES)
+        cs1 = cbx + 1 + (-(cbx + 1)) % LANES
+        n = cs1 - cs0
+        a0 = cs0 - ct0
         acc[:] = zero
+        av = acc[a0:]  # gradient j of column a0 + lane is av[j * TILE_W + lane]
         ax0, ay0, ax1, ay1, ax2, ay2 = cxy[f, 0], cxy[f, 1], cxy[f, 2], cxy[f, 3], cxy[f, 4], cxy[f, 5]
         ex0, ey0 = ax1 - ax0, ay1 - ay0
         ex1, ey1 = ax2 - ax1, ay2 - ay1
@@ -332,121 +340,117 @@ def _backward_tile(
         i20, i21, i22 = inv[f, 6], inv[f, 7], inv[f, 8]
         iz0, iz1, iz2 = iz[f, 0], iz[f, 1], iz[f, 2]
         fr, fg, fb = col[f, 0], col[f, 1], col[f, 2]
-        cs0 = ca - (ca % LANES)
+        pxv = px_tab[cs0:cs1]
         for r in range(ra, rb + 1):
             py = py_tab[r]
             b0 = i01 * py + i02
             b1 = i11 * py + i12
             b2 = i21 * py + i22
             hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
-            row = (r - rt0) * TILE_W - ct0
-            for cs in range(cs0, cbx + 1, LANES):
-                for lane in range(LANES):
-                    c = cs + lane
-                    q = row + c
-                    px = px_tab[c]
-                    w0 = i00 * px + b0
-                    w1 = i10 * px + b1
-                    w2 = i20 * px + b2
-                    inside = (w0 > zero) & (w0 < one) & (w1 > zero) & (w1 < one) & (w2 > zero) & (w2 < one)
-                    # nearest segment, keeping which edge (k) and where on it (t) for the gradient
-                    hx = px - ax0
-                    tt = (hx * ex0 + hy0 * ey0) * ie0
-                    tt = min(max(tt, zero), one)
-                    dx, dy = tt * ex0 - hx, tt * ey0 - hy0
-                    d2 = dx * dx + dy * dy
-                    bt, bdx, bdy, e1sel, e2sel = tt, dx, dy, False, False
-                    hx = px - ax1
-                    tt = (hx * ex1 + hy1 * ey1) * ie1
-                    tt = min(max(tt, zero), one)
-                    dx, dy = tt * ex1 - hx, tt * ey1 - hy1
-                    dd = dx * dx + dy * dy
-                    better = dd < d2
-                    d2 = dd if better else d2
-                    bt = tt if better else bt
-                    bdx = dx if better else bdx
-                    bdy = dy if better else bdy
-                    e1sel = better
-                    hx = px - ax2
-                    tt = (hx * ex2 + hy2 * ey2) * ie2
-                    tt = min(max(tt, zero), one)
-                    dx, dy = tt * ex2 - hx, tt * ey2 - hy2
-                    dd = dx * dx + dy * dy
-                    better = dd < d2
-                    d2 = dd if better else d2
-                    bt = tt if better else bt
-                    bdx = dx if better else bdx
-                    bdy = dy if better else bdy
-                    e1sel = e1sel & (not better)
-                    e2sel = better
-                    e0sel = not (e1sel | e2sel)
-                    valid = inside | (d2 < thr)
-                    xs = (d2 if inside else -d2) * inv_sigma
-                    ex = vexp(-abs(xs))
-                    rec = one / (one + ex)
-                    erec = ex * rec
-                    cov = rec if xs >= zero else erec
-                    unc = erec if xs >= zero else rec
-                    wc0 = min(max(w0, zero), one)
-                    wc1 = min(max(w1, zero), one)
-                    wc2 = min(max(w2, zero), one)
-                    rsw = wc0 + wc1 + wc2
-                    sw = max(rsw, wsum_min)
-                    zq = (wc0 * iz0 + wc1 * iz1 + wc2 * iz2) / sw
-                    z = one / zq
-                    rgb = valid & (z >= near) & (z <= far)
-                    zn = (far - z) * inv_fr
-                    ez = vexp(min(zn - m[q], zero) * inv_gamma)
-                    wf = cov * ez
-                    wf = wf if rgb else zero  # the pair's softmax weight, shifted by the max
-                    gw = g0[q] * fr + g1[q] * fg + g2[q] * fb - gi[q]  # dL/d(weight) * sum
-                    # dL/dxs: alpha through prod(1 - D), colour through the weight
-                    ga = ap[q] * cov
-                    gx = (ga if valid else zero) + gw * wf * unc
-                    gd = two * gx * inv_sigma
-                    gd = gd if inside else -gd  # d(sign d^2)/d(d^2)
-                    u, v = gd * bdx, gd * bdy
-                    omt = one - bt
-                    k0 = (omt if e0sel else zero) + (bt if e2sel else zero)
-                    k1 = (omt if e1sel else zero) + (bt if e0sel else zero)
-                    k2 = (omt if e2sel else zero) + (bt if e1sel else zero)
-                    acc[0 * LANES + lane] += u * k0
-                    acc[1 * LANES + lane] += v * k0
-                    acc[2 * LANES + lane] += u * k1
-                    acc[3 * LANES + lane] += v * k1
-                    acc[4 * LANES + lane] += u * k2
-                    acc[5 * LANES + lane] += v * k2
-                    # depth: zn = (far - 1/zq)/(far - near), zq = sum(wc iz)/sw
-                    gq = gw * wf * inv_gamma * inv_fr * z * z  # dL/dzq
-                    gqs = gq / sw
-                    acc[15 * LANES + lane] += gqs * wc0
-                    acc[16 * LANES + lane] += gqs * wc1
-                    acc[17 * LANES + lane] += gqs * wc2
-                    zsub = zq if rsw >= wsum_min else zero
-                    gw0 = gqs * (iz0 - zsub)
-                    gw1 = gqs * (iz1 - zsub)
-                    gw2 = gqs * (iz2 - zsub)
-                    # the clamp passes the gradient on [0, 1] (as torch.clamp does)
-                    gw0 = gw0 if (w0 >= zero) & (w0 <= one) else zero
-                    gw1 = gw1 if (w1 >= zero) & (w1 <= one) else zero
-                    gw2 = gw2 if (w2 >= zero) & (w2 <= one) else zero
-                    acc[6 * LANES + lane] += gw0 * px
-                    acc[7 * LANES + lane] += gw0 * py
-                    acc[8 * LANES + lane] += gw0
-                    acc[9 * LANES + lane] += gw1 * px
-                    acc[10 * LANES + lane] += gw1 * py
-                    acc[11 * LANES + lane] += gw1
-                    acc[12 * LANES + lane] += gw2 * px
-                    acc[13 * LANES + lane] += gw2 * py
-                    acc[14 * LANES + lane] += gw2
-                    acc[18 * LANES + lane] += g0[q] * wf
-                    acc[19 * LANES + lane] += g1[q] * wf
-                    acc[20 * LANES + lane] += g2[q] * wf
+            o = (r - rt0) * TILE_W + a0
+            sv = st[o:]
+            for lane in range(n):
+                px = pxv[lane]
+                w0 = i00 * px + b0
+                w1 = i10 * px + b1
+                w2 = i20 * px + b2
+                inside = (w0 > zero) & (w0 < one) & (w1 > zero) & (w1 < one) & (w2 > zero) & (w2 < one)
+                # nearest segment, keeping which edge and where on it (t) for the gradient
+                hx = px - ax0
+                tt = (hx * ex0 + hy0 * ey0) * ie0
+                tt = min(max(tt, zero), one)
+                dx, dy = tt * ex0 - hx, tt * ey0 - hy0
+                d2 = dx * dx + dy * dy
+                bt, bdx, bdy = tt, dx, dy
+                hx = px - ax1
+                tt = (hx * ex1 + hy1 * ey1) * ie1
+                tt = min(max(tt, zero), one)
+                dx, dy = tt * ex1 - hx, tt * ey1 - hy1
+                dd = dx * dx + dy * dy
+                e1sel = dd < d2
+                d2 = dd if e1sel else d2
+                bt = tt if e1sel else bt
+                bdx = dx if e1sel else bdx
+                bdy = dy if e1sel else bdy
+                hx = px - ax2
+                tt = (hx * ex2 + hy2 * ey2) * ie2
+                tt = min(max(tt, zero), one)
+                dx, dy = tt * ex2 - hx, tt * ey2 - hy2
+                dd = dx * dx + dy * dy
+                e2sel = dd < d2
+                d2 = dd if e2sel else d2
+                bt = tt if e2sel else bt
+                bdx = dx if e2sel else bdx
+                bdy = dy if e2sel else bdy
+                e1sel = e1sel & (not e2sel)
+                e0sel = not (e1sel | e2sel)
+                valid = inside | (d2 < thr)
+                xs = (d2 if inside else -d2) * inv_sigma
+                ex = vexp(-abs(xs))
+                rec = one / (one + ex)
+                erec = ex * rec
+                cov = rec if xs >= zero else erec
+                unc = erec if xs >= zero else rec
+                wc0 = min(max(w0, zero), one)
+                wc1 = min(max(w1, zero), one)
+                wc2 = min(max(w2, zero), one)
+                rsw = wc0 + wc1 + wc2
+                sw = max(rsw, wsum_min)
+                zq = (wc0 * iz0 + wc1 * iz1 + wc2 * iz2) / sw
+                z = one / zq
+                rgb = valid & (z >= near) & (z <= far)
+                zn = (far - z) * inv_fr
+                ez = vexp(min(zn - sv[lane], zero) * inv_gamma)
+                wf = cov * ez
+                wf = wf if rgb else zero  # the pair's softmax weight, shifted by the max
+                gw = sv[NLOC + lane] * fr + sv[2 * NLOC + lane] * fg + sv[3 * NLOC + lane] * fb - sv[4 * NLOC + lane]  # dL/dweight * sum
+                # dL/dxs: alpha through prod(1 - D), colour through the weight
+                ga = sv[5 * NLOC + lane] * cov
+                gx = (ga if valid else zero) + gw * wf * unc
+                gd = two * gx * inv_sigma
+                gd = gd if inside else -gd  # d(sign d^2)/d(d^2)
+                u, v = gd * bdx, gd * bdy
+                omt = one - bt
+                k0 = (omt if e0sel else zero) + (bt if e2sel else zero)
+                k1 = (omt if e1sel else zero) + (bt if e0sel else zero)
+                k2 = (omt if e2sel else zero) + (bt if e1sel else zero)
+                av[lane] += u * k0
+                av[1 * TILE_W + lane] += v * k0
+                av[2 * TILE_W + lane] += u * k1
+                av[3 * TILE_W + lane] += v * k1
+                av[4 * TILE_W + lane] += u * k2
+                av[5 * TILE_W + lane] += v * k2
+                # depth: zn = (far - 1/zq)/(far - near), zq = sum(wc iz)/sw
+                gq = gw * wf * inv_gamma * inv_fr * z * z  # dL/dzq
+                gqs = gq / sw
+                av[15 * TILE_W + lane] += gqs * wc0
+                av[16 * TILE_W + lane] += gqs * wc1
+                av[17 * TILE_W + lane] += gqs * wc2
+                zsub = zq if rsw >= wsum_min else zero
+                gw0 = gqs * (iz0 - zsub)
+                gw1 = gqs * (iz1 - zsub)
+                gw2 = gqs * (iz2 - zsub)
+                # the clamp passes the gradient on [0, 1] (as torch.clamp does)
+                gw0 = gw0 if (w0 >= zero) & (w0 <= one) else zero
+                gw1 = gw1 if (w1 >= zero) & (w1 <= one) else zero
+                gw2 = gw2 if (w2 >= zero) & (w2 <= one) else zero
+                av[6 * TILE_W + lane] += gw0 * px
+                av[7 * TILE_W + lane] += gw0 * py
+                av[8 * TILE_W + lane] += gw0
+                av[9 * TILE_W + lane] += gw1 * px
+                av[10 * TILE_W + lane] += gw1 * py
+                av[11 * TILE_W + lane] += gw1
+                av[12 * TILE_W + lane] += gw2 * px
+                av[13 * TILE_W + lane] += gw2 * py
+                av[14 * TILE_W + lane] += gw2
+                av[18 * TILE_W + lane] += sv[NLOC + lane] * wf
+                av[19 * TILE_W + lane] += sv[2 * NLOC + lane] * wf
+                av[20 * TILE_W + lane] += sv[3 * NLOC + lane] * wf
         for j in range(N_GRAD):
-            b = j * LANES
-            grad[entry, j] = ((acc[b] + acc[b + 4]) + (acc[b + 2] + acc[b + 6])) + (
-                (acc[b + 1] + acc[b + 5]) + (acc[b + 3] + acc[b + 7])
-            )
+            tot = zero
+            for k in range(a0, a0 + n):
+                tot += acc[j * TILE_W + k]
+            grad[entry, j] = tot
 
 
 @njit(parallel=True, **_OPTS)

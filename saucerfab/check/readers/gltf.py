@@ -347,7 +347,7 @@ def read_glb(path: Path, data: bytes, limits: Limits) -> MeshData:
             doc_bytes = chunk
         elif ctype == b"BIN\x00" and binchunk is None:
             binchunk = chunk
-        off += 8 + clen + (-clen % 4 if ctype != b"JSON" else 0) if False else 8 + clen
+        off += 8 + clen  # chunk lengths include their padding
     if doc_bytes is None:
         raise _bad("the GLB has no JSON chunk")
     doc = _load_json(doc_bytes, limits)

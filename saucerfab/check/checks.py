@@ -1,0 +1,552 @@
+"""The checks: geometry, topology, printer profile, thin walls, colour, units.
+
+:func:`run_checks` takes what a reader produced and returns findings and
+stats. Checks that need a sound mesh are gated: with NaN coordinates no
+geometry is measured; thin walls are only measured on a closed, consistently
+oriented, outward-facing mesh (elsewhere "inside" means nothing), and each
+skip is reported as a ``check_skipped`` info with the reason.
+
+Self-intersections: manifold3d's ``Manifold(mesh).status()`` only says
+whether the triangles form an oriented 2-manifold (every half-edge paired);
+it accepts a mesh whose surfaces pass through each other, so it cannot
+answer "no self-intersections". It is used here as an independent check of
+manifoldness; self-intersections are found with the BVH in
+:mod:`saucerfab.check.bvh` (a test shows manifold3d reporting NoError for
+two interpenetrating boxes that this check flags).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from saucerfab.check.bvh import BVH, tri_tri_intersect
+from saucerfab.check.limits import Limits
+from saucerfab.check.meshdata import MeshData
+from saucerfab.check.report import Finding, finding
+from saucerfab.check.topology import face_geometry, topology, weld
+
+if TYPE_CHECKING:
+    from saucerfab.fabricate.profiles import PrinterProfile
+
+_TEXTURE_CODES = {
+    "missing": "texture_missing",
+    "unreadable": "texture_unreadable",
+    "too_large": "texture_too_large",
+    "unsafe_path": "texture_path_unsafe",
+}
+_COLOUR_CAPABLE = {"3mf", "obj", "ply", "glb", "gltf", "wrl"}
+
+
+def _pt(p: np.ndarray) -> list[float]:
+    return [round(float(x), 4) for x in p]
+
+
+def _where(point: np.ndarray | None = None, faces: Any = None, vertices: Any = None, count: int | None = None) -> dict[str, Any]:
+    w: dict[str, Any] = {}
+    if point is not None:
+        w["point_mm"] = _pt(point)
+    if faces is not None:
+        w["faces"] = [int(f) for f in list(faces)[:10]]
+    if vertices is not None:
+        w["vertices"] = [int(v) for v in list(vertices)[:10]]
+    if count is not None:
+        w["count"] = int(count)
+    return w
+
+
+def _fmt_pt(p: np.ndarray) -> str:
+    return "(" + ", ".join(f"{x:.2f}" for x in p) + ") mm"
+
+
+def run_checks(
+    md: MeshData, profile: PrinterProfile | None, limits: Limits, file_bytes: int
+) -> tuple[list[Finding], dict[str, Any]]:
+    """All checks on one mesh; returns (findings, stats)."""
+    out: list[Finding] = list(md.notes)
+    V = md.vertices * md.unit_mm
+    Fo = md.faces
+    m, n = len(Fo), len(V)
+    stats: dict[str, Any] = {
+        "file_bytes": file_bytes,
+        "units": md.units,
+        "unit_mm": md.unit_mm,
+        "units_stated": md.units_stated,
+        "parts": md.parts,
+        "triangles": m,
+        "vertices": n,
+        "welded_vertices": None,
+        "shells": None,
+        "bbox_mm": None,
+        "volume_mm3": None,
+        "area_mm2": None,
+        "boundary_edges": None,
+        "non_manifold_edges": None,
+        "non_manifold_vertices": None,
+        "flipped_edges": None,
+        "degenerate_faces": None,
+        "duplicate_faces": None,
+        "unreferenced_vertices": None,
+        "self_intersecting_pairs": None,
+        "self_intersection_check": "skipped",
+        "min_wall_mm": None,
+        "min_wall_required_mm": None,
+        "thin_wall_samples": 0,
+        "thin_wall_fraction": None,
+        "manifold3d_status": None,
+        "textures": [t.to_dict() for t in md.textures],
+        "texture_px": max((max(t.width or 0, t.height or 0) for t in md.textures), default=None) or None,
+        "texture_dpi": None,
+        "uv_outside_faces": None,
+        "coloured_fraction": 0.0,
+        "colour": sorted(md.colour_kinds),
+    }
+    if not md.units_stated:
+        out.append(finding("units", f"{md.format.upper()} states no units; read as millimetres"))
+    _printer_file_checks(md, profile, m, file_bytes, out)
+
+    finite = np.isfinite(V).all(axis=1)
+    if not finite.all():
+        bad = np.flatnonzero(~finite)
+        out.append(finding(
+            "non_finite",
+            f"{len(bad):,} vertices have NaN or infinite coordinates (first: vertex {int(bad[0])}); "
+            "fix the exporter - no printer can place them",
+            where=_where(vertices=bad, count=len(bad)),
+        ))
+        out.append(finding("check_skipped", "geometry, topology, thin walls and colour area were not measured: "
+                                            "coordinates are not finite"))
+        _texture_status(md, out)
+        return out, stats
+
+    # ---- topology on welded vertices
+    Vu, vmap = weld(V)
+    Fw = vmap[Fo]
+    topo = topology(Fw, len(Vu))
+    areas, normals, volterms = face_geometry(Vu, Fw)
+    used = np.zeros(n, dtype=bool)
+    used[Fo.reshape(-1)] = True
+    lo, hi = V[used].min(axis=0), V[used].max(axis=0)
+    size = hi - lo
+    diag = float(np.linalg.norm(size)) or 1.0
+    stats.update(
+        welded_vertices=len(Vu), shells=topo.shells,
+        bbox_mm={"min": _pt(lo), "max": _pt(hi), "size": _pt(size)},
+        area_mm2=round(float(areas.sum()), 4),
+    )
+    centroids = Vu[Fw].mean(axis=1)
+
+    zero_area = areas <= 1e-12 * diag * diag
+    degenerate = topo.index_degenerate | zero_area
+    stats["degenerate_faces"] = int(degenerate.sum())
+    if degenerate.any():
+        idx = np.flatnonzero(degenerate)
+        out.append(finding(
+            "degenerate_faces",
+            f"{len(idx):,} faces have a repeated vertex or zero area (first: face {int(idx[0])})",
+            where=_where(centroids[idx[0]], idx, count=len(idx)),
+        ))
+
+    srt = np.sort(Fw, axis=1)
+    nd = ~topo.index_degenerate
+    key = (srt[:, 0] * len(Vu) + srt[:, 1]) * len(Vu) + srt[:, 2] if len(Vu) < 2_000_000 else None
+    if key is not None:
+        _, first_idx, inv, cnt = np.unique(key[nd], return_index=True, return_inverse=True, return_counts=True)
+    else:
+        _, first_idx, inv, cnt = np.unique(srt[nd], axis=0, return_index=True, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    nd_idx = np.flatnonzero(nd)
+    dup_mask = np.zeros(m, dtype=bool)
+    dup_mask[nd_idx] = cnt[inv] > 1
+    is_extra_copy = np.zeros(m, dtype=bool)
+    is_extra_copy[nd_idx] = nd_idx != nd_idx[first_idx[inv]]
+    stats["duplicate_faces"] = int(is_extra_copy.sum())
+    if is_extra_copy.any():
+        idx = np.flatnonzero(dup_mask)
+        out.append(finding(
+            "duplicate_faces",
+            f"{int(is_extra_copy.sum()):,} faces repeat another face's three vertices (first: faces "
+            f"{', '.join(str(int(i)) for i in idx[:2])})",
+            where=_where(centroids[idx[0]], idx, count=int(is_extra_copy.sum())),
+        ))
+
+    unref = int((~used).sum())
+    stats["unreferenced_vertices"] = unref
+    if unref:
+        out.append(finding("unreferenced_vertices", f"{unref:,} vertices are used by no face (harmless, but bloat)",
+                           where=_where(vertices=np.flatnonzero(~used), count=unref)))
+
+    closed = _edge_checks(topo, Vu, Fw, out, stats)
+
+    # ---- volume and orientation per shell
+    shell_vol = np.bincount(topo.shell, weights=volterms, minlength=topo.shells)
+    consistent = closed and not topo.flipped_edges.any()
+    outward = False
+    if consistent:
+        total = float(shell_vol.sum())
+        stats["volume_mm3"] = round(total, 4)
+        outward = _orientation_checks(topo, shell_vol, Vu, Fw, centroids, out)
+    _shell_report(topo, shell_vol, centroids, out)
+
+    # ---- self-intersections and thin walls share one BVH over the sound faces
+    good = ~degenerate & ~is_extra_copy
+    gidx = np.flatnonzero(good)
+    tri = Vu[Fw[gidx]]
+    bvh = BVH.build(tri) if len(gidx) else None
+    if bvh is not None:
+        _self_intersections(bvh, tri, Fw[gidx], gidx, centroids, diag, limits, out, stats)
+    required = profile.min_wall_mm if profile is not None else limits.min_wall_mm
+    stats["min_wall_required_mm"] = required
+    if bvh is not None and consistent and outward:
+        _thin_walls(bvh, tri, normals[gidx], areas[gidx], gidx, diag, required, profile, limits, out, stats)
+    else:
+        why = "the mesh is not closed and consistently oriented outward" if bvh is not None else "no sound faces"
+        out.append(finding("check_skipped", f"wall thickness not measured: {why}"))
+
+    if closed:
+        _manifold3d(Vu, Fw[~degenerate], out, stats)
+
+    # ---- printer fit, units, colour
+    _fit_checks(size, profile, out)
+    _units_check(md, size, limits, out)
+    _colour_checks(md, areas, Fo, centroids, profile, limits, out, stats)
+    return out, stats
+
+
+def _edge_checks(topo: Any, Vu: np.ndarray, Fw: np.ndarray, out: list[Finding], stats: dict[str, Any]) -> bool:
+    """Watertight, edge-manifold, vertex-manifold, consistent winding; True if closed and manifold."""
+    ec = topo.edge_faces
+    mids = (Vu[topo.edges[:, 0]] + Vu[topo.edges[:, 1]]) / 2 if len(topo.edges) else np.zeros((0, 3))
+
+    def faces_on(edge_ids: np.ndarray) -> np.ndarray:
+        return np.flatnonzero(np.isin(topo.face_edges, edge_ids[:10]).any(axis=1))
+
+    boundary = np.flatnonzero(ec == 1)
+    nonman = np.flatnonzero(ec > 2)
+    flipped = np.flatnonzero(topo.flipped_edges)
+    stats["boundary_edges"] = len(boundary)
+    stats["non_manifold_edges"] = len(nonman)
+    stats["flipped_edges"] = len(flipped)
+    if len(boundary):
+        out.append(finding(
+            "not_watertight",
+            f"{len(boundary):,} open edges (used by one face only): the surface has holes, first near "
+            f"{_fmt_pt(mids[boundary[0]])}; close them so the printer knows what is inside",
+            where=_where(mids[boundary[0]], faces_on(boundary), count=len(boundary)),
+        ))
+    if len(nonman):
+        out.append(finding(
+            "non_manifold_edges",
+            f"{len(nonman):,} edges are shared by more than two faces (up to {int(ec.max())}), first near "
+            f"{_fmt_pt(mids[nonman[0]])}",
+            where=_where(mids[nonman[0]], faces_on(nonman), count=len(nonman)),
+        ))
+    pinched = np.flatnonzero(topo.vertex_fans > 1)
+    stats["non_manifold_vertices"] = len(pinched)
+    if len(pinched):
+        out.append(finding(
+            "non_manifold_vertices",
+            f"{len(pinched):,} vertices join separate fans of faces (pinched), first at {_fmt_pt(Vu[pinched[0]])}",
+            where=_where(Vu[pinched[0]], count=len(pinched)),
+        ))
+    if len(flipped):
+        out.append(finding(
+            "inconsistent_orientation",
+            f"{len(flipped):,} edges join faces wound in opposite directions (flipped faces), first near "
+            f"{_fmt_pt(mids[flipped[0]])}; make the winding consistent",
+            where=_where(mids[flipped[0]], faces_on(flipped), count=len(flipped)),
+        ))
+    return not len(boundary) and not len(nonman) and not len(pinched)
+
+
+def _orientation_checks(topo: Any, shell_vol: np.ndarray, Vu: np.ndarray, Fw: np.ndarray,
+                        centroids: np.ndarray, out: list[Finding]) -> bool:
+    """Outward normals: positive volume overall; a negative shell must be a void inside a positive one."""
+    total = float(shell_vol.sum())
+    if total <= 0:
+        out.append(finding(
+            "inverted_normals",
+            f"the closed mesh has {'negative' if total < 0 else 'zero'} volume ({total:.4g} mm3): its normals point "
+            "inward; flip every face",
+            where=_where(centroids[0], [0]),
+        ))
+        return False
+    # bounding boxes of shells, to tell voids (inside a positive shell) from inside-out parts
+    sh = topo.shell
+    lo = np.full((topo.shells, 3), np.inf)
+    hi = np.full((topo.shells, 3), -np.inf)
+    np.minimum.at(lo, sh, centroids)
+    np.maximum.at(hi, sh, centroids)
+    neg = np.flatnonzero(shell_vol < 0)
+    pos = np.flatnonzero(shell_vol > 0)
+    stray = [int(s) for s in neg if not any((lo[p] <= lo[s]).all() and (hi[s] <= hi[p]).all() for p in pos)]
+    if stray:
+        f0 = int(np.flatnonzero(sh == stray[0])[0])
+        out.append(finding(
+            "inverted_normals",
+            f"{len(stray)} shell(s) are inside out (negative volume, not a void inside another shell), "
+            f"first near {_fmt_pt(centroids[f0])}",
+            where=_where(centroids[f0], [f0], count=len(stray)),
+        ))
+        return False
+    return True
+
+
+def _shell_report(topo: Any, shell_vol: np.ndarray, centroids: np.ndarray, out: list[Finding]) -> None:
+    if topo.shells > 1:
+        counts = np.bincount(topo.shell)
+        small = int(np.argmin(counts))
+        f0 = int(np.flatnonzero(topo.shell == small)[0])
+        out.append(finding(
+            "multiple_shells",
+            f"{topo.shells} separate shells; the smallest has {int(counts[small]):,} faces, near "
+            f"{_fmt_pt(centroids[f0])} (stray pieces, or parts meant to print separately?)",
+            where=_where(centroids[f0], [f0], count=topo.shells),
+        ))
+
+
+def _self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndarray, centroids: np.ndarray,
+                        diag: float, limits: Limits, out: list[Finding], stats: dict[str, Any]) -> None:
+    eps = 1e-9 * diag
+    ii, jj, complete = bvh.overlapping_pairs(tol=eps, budget=limits.max_pair_tests)
+    if len(ii) > limits.max_pair_tests:
+        ii, jj, complete = ii[: limits.max_pair_tests], jj[: limits.max_pair_tests], False
+    found: list[np.ndarray] = []
+    for s in range(0, len(ii), 500_000):
+        a, b = ii[s : s + 500_000], jj[s : s + 500_000]
+        shared = (Fg[a][:, :, None] == Fg[b][:, None, :]).any(axis=2).sum(axis=1)
+        keep = shared < 3
+        a, b, shared = a[keep], b[keep], shared[keep]
+        hit = tri_tri_intersect(tri[a], tri[b], shared, eps)
+        if hit.any():
+            found.append(np.stack([a[hit], b[hit]], axis=1))
+    pairs = np.concatenate(found) if found else np.zeros((0, 2), dtype=np.int64)
+    stats["self_intersecting_pairs"] = len(pairs)
+    stats["self_intersection_check"] = "full" if complete else "partial"
+    if not complete:
+        out.append(finding("check_partial", f"self-intersection search stopped at Limits.max_pair_tests "
+                                            f"({limits.max_pair_tests:,}); parts of the mesh were not compared"))
+    if len(pairs):
+        faces = np.unique(gidx[pairs.ravel()])
+        f0 = int(gidx[pairs[0, 0]])
+        out.append(finding(
+            "self_intersections",
+            f"{len(pairs):,} pairs of faces cross each other ({len(faces):,} faces), first near "
+            f"{_fmt_pt(centroids[f0])}: faces {f0} and {int(gidx[pairs[0, 1]])}; union or repair the surfaces",
+            where=_where(centroids[f0], [f0, int(gidx[pairs[0, 1]])], count=len(pairs)),
+        ))
+
+
+def _thin_walls(bvh: BVH, tri: np.ndarray, normals: np.ndarray, areas: np.ndarray, gidx: np.ndarray, diag: float,
+                required: float | None, profile: PrinterProfile | None, limits: Limits,
+                out: list[Finding], stats: dict[str, Any]) -> None:
+    """Wall thickness by inward rays from area-weighted random surface points (fixed seed)."""
+    k = int(limits.thin_wall_samples)
+    total = float(areas.sum())
+    if k <= 0 or total <= 0:
+        return
+    rng = np.random.default_rng(20240601)
+    f = rng.choice(len(tri), size=k, p=areas / total)
+    r1, r2 = rng.random(k), rng.random(k)
+    s1 = np.sqrt(r1)
+    w = np.stack([1 - s1, s1 * (1 - r2), s1 * r2], axis=1)
+    pts = np.einsum("kj,kjd->kd", w, tri[f])
+    dirs = -normals[f]
+    t, _, complete = bvh.first_hits(tri, pts, dirs, f, t_min=1e-7 * diag, budget=limits.max_ray_tests)
+    ok = np.isfinite(t)
+    stats["thin_wall_samples"] = int(ok.sum())
+    if not complete:
+        out.append(finding("check_partial", f"wall-thickness rays stopped at Limits.max_ray_tests "
+                                            f"({limits.max_ray_tests:,}); {int(ok.sum())} of {k} points measured"))
+    if not ok.any():
+        return
+    tt = t[ok]
+    i = int(np.argmin(tt))
+    where_pt = pts[ok][i]
+    stats["min_wall_mm"] = round(float(tt[i]), 4)
+    if required is None:
+        return
+    thin = tt < required
+    stats["thin_wall_fraction"] = round(float(thin.mean()), 5)
+    if thin.any():
+        sev = "warning"
+        if profile is not None and profile.thin_policy == "refuse":
+            sev = "error"
+        who = f"{profile.name}'s minimum" if profile is not None else "the minimum asked for"
+        fi = gidx[f[ok][thin]]
+        out.append(finding(
+            "thin_walls",
+            f"walls under {required:g} mm ({who}): {int(thin.sum())} of {int(ok.sum())} sampled points "
+            f"({100 * thin.mean():.1f}% of the surface); thinnest {float(tt[i]):.3f} mm at {_fmt_pt(where_pt)}",
+            severity=sev,  # type: ignore[arg-type]
+            where=_where(where_pt, fi, count=int(thin.sum())),
+        ))
+
+
+def _manifold3d(Vu: np.ndarray, F: np.ndarray, out: list[Finding], stats: dict[str, Any]) -> None:
+    """manifold3d's verdict on manifoldness (not on self-intersection: it does not test that)."""
+    try:
+        import manifold3d
+    except ImportError:  # optional: the topology checks above stand on their own
+        return
+    try:
+        mesh = manifold3d.Mesh(vert_properties=np.ascontiguousarray(Vu, dtype=np.float32),
+                               tri_verts=np.ascontiguousarray(F, dtype=np.uint32))
+        status = manifold3d.Manifold(mesh).status()
+    except (ValueError, TypeError, RuntimeError) as exc:
+        stats["manifold3d_status"] = f"failed: {exc}"
+        return
+    name = getattr(status, "name", str(status)).split(".")[-1]
+    stats["manifold3d_status"] = name
+    if name != "NoError":
+        out.append(finding("not_manifold", f"manifold3d rejects the mesh: {name}"))
+
+
+def _printer_file_checks(md: MeshData, profile: PrinterProfile | None, m: int, file_bytes: int,
+                         out: list[Finding]) -> None:
+    if profile is None:
+        return
+    fmt = "glb" if md.format == "gltf" else md.format
+    if fmt not in profile.accepted_formats:
+        out.append(finding(
+            "format_not_accepted",
+            f"{profile.name} does not take {md.format.upper()} (it takes {', '.join(profile.accepted_formats)}; "
+            f"prefer {profile.preferred_format})",
+        ))
+    if profile.max_triangles and m > profile.max_triangles:
+        out.append(finding(
+            "too_many_triangles",
+            f"{m:,} triangles, over {profile.name}'s limit of {profile.max_triangles:,}; decimate the mesh",
+        ))
+    if profile.max_file_mb and file_bytes > profile.max_file_mb * 1e6:
+        out.append(finding(
+            "file_too_large",
+            f"the file is {file_bytes / 1e6:.1f} MB, over {profile.name}'s limit of {profile.max_file_mb:g} MB",
+        ))
+
+
+def _fit_checks(size: np.ndarray, profile: PrinterProfile | None, out: list[Finding]) -> None:
+    if profile is None:
+        return
+    vol = np.array(profile.build_volume_mm, dtype=np.float64)
+    fmt = " x ".join(f"{v:.1f}" for v in size)
+    if (size <= vol).all():
+        return
+    if (np.sort(size) <= np.sort(vol)).all():
+        out.append(finding("fits_rotated", f"{fmt} mm fits {profile.name}'s build volume only with axes swapped"))
+        return
+    out.append(finding(
+        "exceeds_build_volume",
+        f"{fmt} mm does not fit {profile.name}'s build volume "
+        f"{' x '.join(f'{v:g}' for v in vol)} mm in any axis order; scale it down or split it",
+    ))
+
+
+def _units_check(md: MeshData, size: np.ndarray, limits: Limits, out: list[Finding]) -> None:
+    big = float(size.max()) if size.size else 0.0
+    lo, hi = limits.plausible_size_mm
+    unit = "millimetres" if not md.units_stated else md.units
+    if 0 < big < lo:
+        out.append(finding(
+            "units_suspect",
+            f"the model is only {big:.4g} mm across (read in {unit}); if it was written in metres it is "
+            f"{big * 1000:.4g} mm - check the export units",
+        ))
+    elif big > hi:
+        out.append(finding(
+            "units_suspect",
+            f"the model is {big:,.0f} mm across (read in {unit}); "
+            + (f"glTF is in metres by specification - if it was written in millimetres, scale it by 0.001"
+               if md.format in ("glb", "gltf") else "was it written in microns or with a wrong unit?"),
+        ))
+
+
+def _texture_status(md: MeshData, out: list[Finding]) -> None:
+    for t in md.textures:
+        if t.status != "ok":
+            out.append(finding(_TEXTURE_CODES.get(t.status, "texture_unreadable"), t.message, where={"entry": t.name}))
+
+
+def _colour_checks(md: MeshData, areas: np.ndarray, Fo: np.ndarray, centroids: np.ndarray,
+                   profile: PrinterProfile | None, limits: Limits, out: list[Finding], stats: dict[str, Any]) -> None:
+    _texture_status(md, out)
+    if profile is not None and profile.max_texture_px:
+        for t in md.textures:
+            if t.status == "ok" and max(t.width or 0, t.height or 0) > profile.max_texture_px:
+                out.append(finding(
+                    "texture_too_large",
+                    f"texture {t.name!r} is {t.width} x {t.height} px, over {profile.name}'s limit of "
+                    f"{profile.max_texture_px} px a side; downscale it",
+                    where={"entry": t.name},
+                ))
+    m = len(Fo)
+    total = float(areas.sum()) or 1.0
+    coloured = np.zeros(m, dtype=bool) if md.face_colour is None else md.face_colour.copy()
+    if md.face_texture is not None and md.corner_uv is not None:
+        textured = md.face_texture >= 0
+        coloured |= textured
+        uv = md.corner_uv[textured]
+        tol = limits.uv_tolerance
+        bad = ~np.isfinite(uv).all(axis=(1, 2)) | ((uv < -tol) | (uv > 1 + tol)).any(axis=(1, 2))
+        tidx = np.flatnonzero(textured)
+        stats["uv_outside_faces"] = int(bad.sum())
+        if bad.any():
+            fb = tidx[bad]
+            finite_uv = uv[np.isfinite(uv).all(axis=(1, 2))]
+            rng = (f" (u, v range {finite_uv[..., 0].min():.3g}..{finite_uv[..., 0].max():.3g}, "
+                   f"{finite_uv[..., 1].min():.3g}..{finite_uv[..., 1].max():.3g})") if len(finite_uv) else ""
+            out.append(finding(
+                "uv_out_of_range",
+                f"{len(fb):,} textured faces have texture coordinates outside [0, 1]{rng}: printers clamp or "
+                f"wrap them differently, so the colour would be wrong; first near {_fmt_pt(centroids[fb[0]])}",
+                where=_where(centroids[fb[0]], fb, count=len(fb)),
+            ))
+        _texture_dpi(md, areas, textured, profile, limits, out, stats)
+    frac = float(areas[coloured].sum()) / total if m else 0.0
+    stats["coloured_fraction"] = round(frac, 5)
+    if not md.colour_kinds:
+        if md.format in _COLOUR_CAPABLE or profile is not None:
+            out.append(finding("no_colour", f"the {md.format.upper()} carries no colour (no texture, vertex or "
+                                            "material colours): it prints in the printer's default colour"))
+    elif frac < 0.999:
+        un = np.flatnonzero(~coloured)
+        out.append(finding(
+            "partly_coloured",
+            f"only {100 * frac:.1f}% of the surface carries colour; the rest prints in the default colour, "
+            f"first uncoloured face near {_fmt_pt(centroids[un[0]])}",
+            where=_where(centroids[un[0]], un, count=len(un)),
+        ))
+
+
+def _texture_dpi(md: MeshData, areas: np.ndarray, textured: np.ndarray, profile: PrinterProfile | None,
+                 limits: Limits, out: list[Finding], stats: dict[str, Any]) -> None:
+    """Texture resolution on the model: texels per inch, area-weighted median over textured faces."""
+    assert md.corner_uv is not None and md.face_texture is not None
+    ok_tex = np.array([t.status == "ok" and t.width and t.height for t in md.textures] + [False], dtype=bool)
+    wh = np.array([[t.width or 0, t.height or 0] for t in md.textures] + [[0, 0]], dtype=np.float64)
+    ti = md.face_texture
+    sel = textured & ok_tex[ti] & (areas > 0)
+    uv = md.corner_uv[sel]
+    fin = np.isfinite(uv).all(axis=(1, 2))
+    if not fin.any():
+        return
+    uv = uv[fin]
+    idx = np.flatnonzero(sel)[fin]
+    px = uv * wh[ti[idx]][:, None, :]
+    e1, e2 = px[:, 1] - px[:, 0], px[:, 2] - px[:, 0]
+    texel_area = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) / 2
+    a = areas[idx]
+    dpi = 25.4 * np.sqrt(texel_area / a)
+    order = np.argsort(dpi)
+    cum = np.cumsum(a[order])
+    med = float(dpi[order][np.searchsorted(cum, cum[-1] / 2)])
+    stats["texture_dpi"] = round(med, 1)
+    if profile is not None:
+        want = limits.texture_dpi_fraction * profile.dpi
+        if med < want:
+            out.append(finding(
+                "texture_low_dpi",
+                f"the texture gives {med:.0f} dpi on the model (area-weighted median), under "
+                f"{limits.texture_dpi_fraction:g} x {profile.name}'s {profile.dpi:g} dpi; colours will look soft",
+            ))

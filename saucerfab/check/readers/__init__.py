@@ -1,0 +1,161 @@
+"""Safe readers, one per format, and the dispatcher that picks one by content.
+
+The format comes from the file's first bytes (magic numbers, headers), not
+its name: a PNG named ``.obj`` is "not a mesh", and a 3MF named ``.stl`` is
+read as 3MF with an ``extension_mismatch`` warning. Each reader raises
+:class:`~saucerfab.check.meshdata.ReadError` with an unreadable code for
+anything it cannot read, and bounds sizes and counts before allocating.
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import os
+import zlib
+from pathlib import Path
+
+from saucerfab.check.limits import Limits
+from saucerfab.check.meshdata import MeshData, ReadError
+from saucerfab.check.report import finding
+
+#: file extension -> format name used in reports and printer profiles
+EXTENSIONS = {
+    ".3mf": "3mf", ".obj": "obj", ".stl": "stl", ".ply": "ply", ".glb": "glb",
+    ".gltf": "gltf", ".wrl": "wrl", ".vrml": "wrl", ".wrz": "wrl",
+}
+
+_IMAGES = (
+    (b"\x89PNG\r\n\x1a\n", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
+    (b"%PDF", "a PDF document"), (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"),
+    (b"\x7fELF", "an executable"), (b"MZ", "a Windows executable"), (b"Rar!", "a RAR archive"),
+    (b"7z\xbc\xaf", "a 7-Zip archive"), (b"BZh", "a bzip2 file"), (b"\xfd7zXZ", "an xz file"),
+)
+
+
+def sniff(head: bytes, size: int, ext: str) -> str:
+    """The format ``head`` (the first bytes) shows, or raise ``not_a_mesh``/``unsupported_format``."""
+    from saucerfab.check.readers.stl import looks_binary
+
+    if head.startswith(b"PK\x03\x04") or head.startswith(b"PK\x05\x06"):
+        return "3mf"
+    if head.startswith(b"glTF"):
+        return "glb"
+    if head.startswith(b"ply\n") or head.startswith(b"ply\r"):
+        return "ply"
+    if head.startswith(b"#VRML"):
+        return "wrl"
+    if head.startswith(b"\x1f\x8b"):
+        return "gzip"
+    if head[:4] == b"RIFF" and head[8:12] == b"WEBP":
+        raise ReadError("not_a_mesh", "the file is a WebP image, not a mesh")
+    for magic, what in _IMAGES:
+        if head.startswith(magic):
+            raise ReadError("not_a_mesh", f"the file is {what}, not a mesh")
+    if looks_binary(head, size):
+        return "stl"
+    stripped = head.lstrip(b"\xef\xbb\xbf \t\r\n")
+    if stripped[:5].lower() == b"solid" and (b"facet" in head.lower() or size < len(head) + 1):
+        return "stl"
+    if stripped.startswith(b"{") and b'"asset"' in head or (ext == "gltf" and stripped.startswith(b"{")):
+        return "gltf"
+    if b"\x00" in head:
+        if ext == "stl":
+            return "stl"  # a binary STL whose size is off: its reader says how
+        raise ReadError("not_a_mesh", "the file is binary data of no mesh format the checker knows")
+    if ext == "stl" and stripped[:5].lower() == b"solid":
+        return "stl"
+    text_like = b"\nv " in head or head.startswith(b"v ") or b"\nf " in head or b"mtllib" in head or b"\nvt " in head
+    if ext == "obj" or text_like:
+        return "obj"
+    if ext in EXTENSIONS.values():
+        return ext
+    raise ReadError("not_a_mesh", "the content is not a mesh format the checker reads (3MF, OBJ, STL, PLY, GLB/glTF, VRML)")
+
+
+def read_mesh(path: str | os.PathLike[str], limits: Limits) -> MeshData:
+    """Read any supported mesh file safely; raise :class:`ReadError` if it cannot be read."""
+    from saucerfab.check.readers.safe import read_file_bounded
+
+    p = Path(path)
+    try:
+        if not p.is_file():
+            raise ReadError("file_not_found", f"{os.fspath(p)!r} does not exist or is not a file")
+        size = p.stat().st_size
+    except OSError as exc:
+        raise ReadError("file_not_found", f"cannot open {os.fspath(p)!r}: {exc.strerror or exc}") from None
+    if size == 0:
+        raise ReadError("empty_file", "the file is empty (0 bytes)")
+    if size > limits.max_file_bytes:
+        raise ReadError(
+            "over_check_limit",
+            f"the file is {size:,} bytes, over the checker's limit of {limits.max_file_bytes:,} (Limits.max_file_bytes)",
+        )
+    with open(p, "rb") as fh:
+        head = fh.read(4096)
+    name = p.name.lower()
+    ext = EXTENSIONS.get(Path(name[:-3] if name.endswith(".gz") else name).suffix, "")
+    fmt = sniff(head, size, ext)
+    data: bytes | None = None
+    if fmt == "gzip":
+        data = _gunzip(read_file_bounded(p, limits.max_file_bytes, "file"), limits)
+        if not data.startswith(b"#VRML"):
+            raise ReadError("not_a_mesh", "a gzip file that does not hold VRML (only .wrz/.wrl.gz are read compressed)")
+        fmt = "wrl"
+    if fmt == "stl":
+        from saucerfab.check.readers.stl import read_stl
+
+        md = read_stl(p, head, size, limits)
+    else:
+        if data is None:
+            data = read_file_bounded(p, limits.max_file_bytes, "file")
+        if fmt == "3mf":
+            from saucerfab.check.readers.threemf import read_3mf
+
+            md = read_3mf(data, limits)
+        elif fmt == "obj":
+            from saucerfab.check.readers.obj import read_obj
+
+            md = read_obj(p, data, limits)
+        elif fmt == "ply":
+            from saucerfab.check.readers.ply import read_ply
+
+            md = read_ply(p, data, limits)
+        elif fmt == "glb":
+            from saucerfab.check.readers.gltf import read_glb
+
+            md = read_glb(p, data, limits)
+        elif fmt == "gltf":
+            from saucerfab.check.readers.gltf import read_gltf
+
+            md = read_gltf(p, data, limits)
+        elif fmt == "wrl":
+            from saucerfab.check.readers.vrml import read_vrml
+
+            md = read_vrml(p, data, limits)
+        else:  # pragma: no cover - sniff only returns the names above
+            raise ReadError("unsupported_format", f"format {fmt!r} is not read")
+    md.format = fmt
+    if ext and ext != fmt and not (ext == "glb" and fmt == "gltf"):
+        md.notes.insert(0, finding(
+            "extension_mismatch",
+            f"the file is named .{ext} but holds {fmt.upper()}; rename it so printer software reads it right",
+        ))
+    return md
+
+
+def _gunzip(raw: bytes, limits: Limits) -> bytes:
+    """Decompress with the output bounded (a gzip bomb stops at the limit)."""
+    out = io.BytesIO()
+    try:
+        with gzip.GzipFile(fileobj=io.BytesIO(raw)) as gz:
+            while chunk := gz.read(1 << 20):
+                out.write(chunk)
+                if out.tell() > limits.max_uncompressed_bytes:
+                    raise ReadError(
+                        "archive_too_large",
+                        f"the gzip file inflates past {limits.max_uncompressed_bytes:,} bytes (Limits.max_uncompressed_bytes)",
+                    )
+    except (OSError, EOFError, zlib.error) as exc:
+        raise ReadError("truncated", f"the gzip data is damaged: {exc}") from None
+    return out.getvalue()

@@ -1,0 +1,166 @@
+"""``saucerfab export``: a design folder -> print-ready files for a printer.
+
+    saucerfab export DESIGN_DIR --printer j55 --cup-diameter-mm 80 --formats 3mf,obj,glb --out DIR
+
+Prints progress (stderr), a summary (size, triangles, volume, file sizes,
+warnings) and the validity check of each written mesh file
+(``saucerfab.check.check_mesh``). Exit code: 0 when written and every check
+passes, the worst check's exit code otherwise (1 not printable, 2
+unreadable), 2 for bad input (nothing written then).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+HELP = "turn a design into print-ready files (3MF, OBJ, GLB, PLY, VRML) with scene.json"
+
+
+def _rgb(text: str) -> tuple[int, int, int]:
+    try:
+        parts = tuple(int(p) for p in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected R,G,B integers, got {text!r}") from None
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"expected three numbers R,G,B, got {text!r}")
+    return parts  # type: ignore[return-value]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("design", help="the design folder (from 'saucerfab design')")
+    p.add_argument("-o", "--out", required=True, help="output folder (new, empty, or a previous export)")
+    p.add_argument("--printer", default="j55", help="printer profile key or .toml path (default j55; see 'saucerfab printers')")
+    p.add_argument(
+        "--cup-diameter-mm",
+        type=float,
+        default=None,
+        help="width of the real cup in mm (circle: diameter; ellipse: 2a; prism: 2 x circumradius); "
+        "default: the design's scene",
+    )
+    p.add_argument(
+        "--formats",
+        default=None,
+        help="comma-separated: 3mf, obj, glb, ply, wrl, stl (default: the printer's preferred format)",
+    )
+    p.add_argument("--texture-px", type=int, default=None, help="atlas edge in pixels, a power of two (default: from the printer's dpi)")
+    g = p.add_argument_group("solid and cup seat (millimetres)")
+    g.add_argument("--base-mm", type=float, default=3.0, help="plate thickness under the cup's standing plane (default 3)")
+    g.add_argument("--min-thickness-mm", type=float, default=2.0, help="material under the saucer's lowest point (default 2)")
+    g.add_argument("--seat", choices=("recess", "ring", "none"), default="recess", help="cup seat kind (default recess)")
+    g.add_argument("--no-seat", action="store_const", const="none", dest="seat", help="same as --seat none")
+    g.add_argument("--seat-depth-mm", type=float, default=1.5, help="recess depth or ring height (default 1.5)")
+    g.add_argument("--seat-clearance-mm", type=float, default=0.5, help="gap around the cup's footprint (default 0.5)")
+    g.add_argument("--seat-rim-mm", type=float, default=4.0, help="plate width around the recess (default 4)")
+    c = p.add_argument_group("colour and files")
+    c.add_argument("--wall-rgb", type=_rgb, default=(200, 200, 200), help="sRGB of walls, base and seat (default 200,200,200)")
+    c.add_argument("--no-inpaint", action="store_true", help="leave unseen areas in the wall colour instead of continuing their neighbours' colours")
+    c.add_argument("--zip-obj", action="store_true", help="write OBJ + MTL + PNG as one zip (what bureaus ask for)")
+    c.add_argument("--name", default="saucer", help="file stem of the written files (default saucer)")
+    p.add_argument("--no-check", action="store_true", help="skip the validity check of the written files")
+    p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+
+
+def check_file(path: Path, profile: Any) -> Any | None:
+    """``saucerfab.check.check_mesh(path, printer=profile)``, or None where the checker is absent."""
+    try:
+        from saucerfab.check import check_mesh  # type: ignore[attr-defined]
+    except ImportError:
+        return None
+    return check_mesh(path, printer=profile)
+
+
+def _size(n: int) -> str:
+    for unit, f in (("MB", 1e6), ("kB", 1e3)):
+        if n >= f:
+            return f"{n / f:.1f} {unit}"
+    return f"{n} B"
+
+
+def run(args: argparse.Namespace) -> int:
+    from saucerfab.fabricate.options import FabOptions
+    from saucerfab.fabricate.pipeline import export_design
+    from saucerfab.fabricate.profiles import load_profile
+    from saucerfab.fabricate.registry import WRITERS
+
+    options = FabOptions(
+        base_thickness_mm=args.base_mm,
+        min_thickness_mm=args.min_thickness_mm,
+        seat=args.seat,
+        seat_depth_mm=args.seat_depth_mm,
+        seat_clearance_mm=args.seat_clearance_mm,
+        seat_rim_mm=args.seat_rim_mm,
+        texture_px=args.texture_px,
+        wall_rgb=tuple(args.wall_rgb),
+        inpaint="none" if args.no_inpaint else "harmonic",
+        obj_zip=args.zip_obj,
+        name=args.name,
+    )
+    profile = load_profile(args.printer)
+    formats = [f for f in args.formats.split(",") if f.strip()] if args.formats is not None else None
+
+    def progress(step: str, fraction: float) -> None:
+        if not args.quiet:
+            print(f"[{fraction * 100:5.1f}%] {step}", file=sys.stderr, flush=True)
+
+    result = export_design(
+        args.design,
+        args.out,
+        printer=profile,
+        cup_diameter_mm=args.cup_diameter_mm,
+        formats=formats,
+        options=options,
+        progress=progress,
+    )
+
+    checks: list[tuple[Path, Any]] = []
+    if not args.no_check:
+        for fmt, paths in result.files.items():
+            suffix = WRITERS[fmt].mesh_suffix
+            mesh_files = [p for p in paths if p.suffix == suffix] or [p for p in paths if p.suffix == ".zip"]
+            for path in mesh_files:
+                checks.append((path, check_file(path, profile)))
+    exit_code = max([int(r.exit_code) for _, r in checks if r is not None], default=0)
+
+    if args.json:
+        d = result.to_dict()
+        d["checks"] = [
+            {"path": str(p), "verdict": getattr(r, "verdict", None), "exit_code": getattr(r, "exit_code", None)}
+            for p, r in checks
+        ]
+        d["exit_code"] = exit_code
+        print(json.dumps(d, indent=2))
+        return exit_code
+
+    x, y, z = result.bbox_mm
+    print(f"exported {args.design} -> {result.out} for {profile.name} ({profile.key})")
+    print(f"  part     {x:.1f} x {y:.1f} x {z:.1f} mm; cup {result.cup_diameter_mm:g} mm ({result.mm_per_unit:g} mm per model unit)")
+    print(f"  solid    {result.triangles:,} triangles, {result.vertices:,} vertices, volume {result.volume_mm3 / 1000:.2f} cm3")
+    print(
+        f"  texture  {result.texture_px} x {result.texture_px} px; "
+        f"{result.unseen_fraction * 100:.1f}% of the top unseen by the viewer "
+        f"({'continued from neighbours' if options.inpaint == 'harmonic' else 'wall colour'})"
+    )
+    print("  files")
+    for name, n in sorted(result.file_bytes.items()):
+        print(f"    {name:28s} {_size(n):>10s}")
+    for w in result.warnings:
+        print(f"  warning: {w}")
+    if checks:
+        print("  check")
+        for path, rep in checks:
+            if rep is None:
+                print(f"    {path.name:28s} not checked: saucerfab.check is not installed")
+                continue
+            findings = list(getattr(rep, "findings", []))
+            errors = sum(1 for f in findings if getattr(f, "severity", "") == "error")
+            warns = sum(1 for f in findings if getattr(f, "severity", "") == "warning")
+            print(f"    {path.name:28s} {rep.verdict} ({errors} errors, {warns} warnings)")
+            for f in findings:
+                if getattr(f, "severity", "") in ("error", "warning"):
+                    print(f"      {f.severity}: {getattr(f, 'message', f)}")
+    return exit_code

@@ -1,0 +1,441 @@
+"""``saucerfab batch`` end to end: real design, export and check on tiny jobs.
+
+One small batch (design folders, a raw-input job designed at a tiny size, a
+broken upload) is run once in this process as the reference; the local
+process pool, a Dask ``LocalCluster``, a killed-and-resumed batch and a
+second run of the same jobs must all give the same bytes.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import psutil
+import pytest
+
+from saucerfab.batch import load_manifest, plan_batch, run_batch, run_job
+from saucerfab.batch.jobs import MARKER, completed, read_marker
+from saucerfab.batch.report import HTML_NAME, JSON_NAME, LineDisplay
+from saucerfab.batch.runner import LOCK_NAME, _locked
+from saucerfab.cli import main
+from saucerfab.design import save_design, synthetic_design
+from saucerfab.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+DESIGN_JOBS = ["a-j55", "b-bureau", "a-j850-ply", "b-hp", "a-glb"]
+RAW_JOB = "raw-ring-star"
+BAD_JOB = "broken-upload"
+ALL_JOBS = [*DESIGN_JOBS, RAW_JOB, BAD_JOB]
+
+MANIFEST = """
+[defaults]
+printer = "j55"
+cup_diameter_mm = 80
+formats = ["3mf"]
+export_options = { texture_px = 64 }
+design_options = { resolution = 12, image_size = 16, max_iters = 4 }
+
+[[job]]
+id = "a-j55"
+design = "designs/a"
+
+[[job]]
+id = "b-bureau"
+design = "designs/b"
+printer = "bureau"
+formats = ["obj"]
+export_options = { obj_zip = true }
+
+[[job]]
+id = "a-j850-ply"
+design = "designs/a"
+printer = "j850"
+formats = ["ply", "3mf"]
+
+[[job]]
+id = "b-hp"
+design = "designs/b"
+printer = "hp_jf580"
+cup_diameter_mm = 60
+
+[[job]]
+id = "a-glb"
+design = "designs/a"
+printer = "bureau"
+formats = ["glb"]
+
+[[job]]
+id = "raw-ring-star"
+direct = "images/ring.png"
+reflected = "images/star.png"
+shape = "waves"
+
+[[job]]
+id = "broken-upload"
+direct = "images/broken.png"
+reflected = "images/star.png"
+"""
+
+
+def _sample_images() -> dict[str, bytes]:
+    spec = importlib.util.spec_from_file_location("make_batch_samples", ROOT / "samples/batch/make_batch_samples.py")
+    assert spec and spec.loader
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.images()
+
+
+def make_batch(folder: Path, manifest: str = MANIFEST) -> Path:
+    """A batch folder: two tiny design folders, three images (one broken), the manifest."""
+    folder.mkdir(parents=True, exist_ok=True)
+    save_design(synthetic_design(shape="waves", seed=1, resolution=12, texture_size=32), folder / "designs/a")
+    save_design(synthetic_design(shape="ripples", seed=2, resolution=12, texture_size=32), folder / "designs/b")
+    (folder / "images").mkdir(exist_ok=True)
+    for name, data in _sample_images().items():
+        if name in ("ring.png", "star.png", "broken.png"):
+            (folder / "images" / name).write_bytes(data)
+    (folder / "manifest.toml").write_text(manifest, encoding="utf-8")
+    return folder / "manifest.toml"
+
+
+def job_files(out: Path) -> dict[str, bytes]:
+    """Every file of every job folder (not the reports), by path."""
+    files = {}
+    for job in sorted(p for p in out.iterdir() if p.is_dir() and not p.name.startswith(".")):
+        for p in sorted(job.rglob("*")):
+            if p.is_file():
+                files[p.relative_to(out).as_posix()] = p.read_bytes()
+    return files
+
+
+def assert_same_files(a: dict[str, bytes], b: dict[str, bytes]) -> None:
+    assert sorted(a) == sorted(b)
+    differ = [k for k in a if a[k] != b[k]]
+    assert not differ, f"files differ: {differ}"
+
+
+def assert_no_temporaries(out: Path) -> None:
+    left = [p.name for p in out.rglob("*") if p.name.endswith((".part", ".old")) or p.name == ".batch-tmp"]
+    assert not left, left
+
+
+@pytest.fixture(scope="module")
+def batch(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return make_batch(tmp_path_factory.mktemp("batch"))
+
+
+@pytest.fixture(scope="module")
+def reference(batch: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
+    """The batch run once in this process: the bytes every other run must match."""
+    out = tmp_path_factory.mktemp("ref") / "out"
+    result = run_batch(batch, out, workers=0)
+    return out, result
+
+
+def test_reference_outcomes(reference: tuple[Path, object]) -> None:
+    out, result = reference
+    assert result.exit_code == 1  # the broken upload
+    for job_id in [*DESIGN_JOBS, RAW_JOB]:
+        o = result.outcome(job_id)
+        assert o.status == "ok", (job_id, o.reason)
+        assert o.verdict == "printable"
+        assert not o.reused and o.times["total"] > 0
+        marker = read_marker(out / job_id)
+        assert marker and marker["complete"] and marker["status"] == "ok"
+        assert completed(out, job_id, marker["key"]) is not None
+        exported = [f for f in marker["files"] if f.startswith("export/")]
+        assert "export/scene.json" in exported
+        checks = [f for f in marker["files"] if f.startswith("check/")]
+        assert checks and all(json.loads((out / job_id / c).read_text())["verdict"] == "printable" for c in checks)
+    assert "design" in result.outcome(RAW_JOB).times
+    assert (out / RAW_JOB / "design" / "design.json").is_file()
+    assert {f.split("/")[-1] for f in result.outcome("a-j850-ply").files} >= {"saucer.ply", "saucer.3mf"}
+    assert any(f.endswith(".zip") for f in result.outcome("b-bureau").files)
+    bad = result.outcome(BAD_JOB)
+    assert bad.status == "failed" and bad.stage == "design"
+    assert "truncated" in bad.reason
+    assert read_marker(out / BAD_JOB)["complete"] is False
+    assert sorted(p.name for p in (out / BAD_JOB).iterdir()) == [MARKER]
+    report = json.loads((out / JSON_NAME).read_text())
+    assert report["state"] == "finished"
+    assert report["summary"] == {"jobs": 7, "ok": 6, "failed": 1, "pending": 0, "reused": 0}
+    assert [j["id"] for j in report["jobs"]] == ALL_JOBS
+    html = (out / HTML_NAME).read_text()
+    assert "broken-upload" in html and "truncated" in html and "<script" not in html
+    assert_no_temporaries(out)
+
+
+def test_rerun_skips_unchanged_and_runs_changed(batch: Path, reference: tuple[Path, object], tmp_path: Path) -> None:
+    import shutil
+
+    out = tmp_path / "out"
+    shutil.copytree(reference[0], out)
+    before = {j: (out / j / MARKER).stat().st_mtime_ns for j in ALL_JOBS}
+    again = run_batch(batch, out, workers=0)
+    for j in [*DESIGN_JOBS, RAW_JOB]:
+        assert again.outcome(j).reused and again.outcome(j).status == "ok"
+        assert (out / j / MARKER).stat().st_mtime_ns == before[j]  # not rewritten
+    assert not again.outcome(BAD_JOB).reused and again.outcome(BAD_JOB).status == "failed"
+    assert json.loads((out / JSON_NAME).read_text())["summary"]["reused"] == 6
+
+    # change one input of design b (a byte of its texture's metadata-free copy): its jobs run again
+    folder = tmp_path / "copy"
+    shutil.copytree(batch.parent, folder)
+    design_b = folder / "designs" / "b"
+    save_design(synthetic_design(shape="ripples", seed=5, resolution=12, texture_size=32), design_b)
+    changed = run_batch(folder / "manifest.toml", out, workers=0)
+    rerun = {j for j in ALL_JOBS if not changed.outcome(j).reused}
+    assert rerun == {"b-bureau", "b-hp", BAD_JOB}
+    assert changed.outcome("b-hp").status == "ok"
+    # a changed parameter (printer) changes the key, too
+    m = load_manifest(folder / "manifest.toml")
+    plan = {p.job.id: p for p in plan_batch(m, out)}
+    assert plan["a-j55"].action == "reuse" and plan["b-hp"].action == "reuse"
+    (folder / "manifest.toml").write_text(MANIFEST.replace('id = "b-hp"\ndesign = "designs/b"\nprinter = "hp_jf580"', 'id = "b-hp"\ndesign = "designs/b"\nprinter = "j55"'))
+    plan = {p.job.id: p for p in plan_batch(load_manifest(folder / "manifest.toml"), out)}
+    assert plan["b-hp"].action == "run" and plan["a-j55"].action == "reuse"
+    # damaged output (a file edited after the run) is not complete any more
+    target = next((out / "a-j55" / "export").glob("*.3mf"))
+    target.write_bytes(target.read_bytes()[:-1])
+    plan = {p.job.id: p for p in plan_batch(load_manifest(folder / "manifest.toml"), out)}
+    assert plan["a-j55"].action == "run"
+
+
+def test_run_job_is_deterministic(batch: Path, reference: tuple[Path, object], tmp_path: Path) -> None:
+    """The same job twice (design included) gives byte-identical files."""
+    m = load_manifest(batch)
+    for job_id in (RAW_JOB, "a-j850-ply"):
+        outs = []
+        for k in range(2):
+            out = tmp_path / f"o{k}"
+            result, reused = run_job(m.job(job_id), m.root, out, force=True)
+            assert result.status == "ok" and not reused
+            outs.append({k2: v for k2, v in job_files(out).items() if k2.startswith(job_id + "/")})
+        assert_same_files(outs[0], outs[1])
+        ref = {k: v for k, v in job_files(reference[0]).items() if k.startswith(job_id + "/")}
+        assert_same_files(outs[0], ref)
+    result, reused = run_job(m.job(RAW_JOB), m.root, tmp_path / "o0")
+    assert reused and result.status == "ok"
+
+
+def test_local_pool_same_outputs(batch: Path, reference: tuple[Path, object], tmp_path: Path) -> None:
+    lines: list[str] = []
+
+    class Capture:
+        def write(self, s: str) -> None:
+            lines.append(s)
+
+        def flush(self) -> None:
+            pass
+
+    out = tmp_path / "out"
+    result = run_batch(batch, out, workers=2, display=LineDisplay(Capture()))
+    assert result.exit_code == 1
+    assert result.engine == "local process pool, 2 workers"
+    assert_same_files(job_files(out), job_files(reference[0]))
+    workers = {result.outcome(j).worker.split(":")[1] for j in ALL_JOBS}
+    assert str(os.getpid()) not in workers  # ran in the pool's processes
+    text = "".join(lines)
+    assert "7 jobs" in text and "broken-upload: failed" in text and "a-j55: ok" in text
+    assert_no_temporaries(out)
+
+
+def test_local_dask_cluster_same_outputs(batch: Path, reference: tuple[Path, object], tmp_path: Path) -> None:
+    from distributed import LocalCluster
+
+    out = tmp_path / "out"
+    with LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=True, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
+        result = run_batch(batch, out, scheduler=cluster.scheduler_address)
+        worker_pids = set(cluster.scheduler_info["workers"].keys())
+    assert worker_pids
+    assert result.exit_code == 1
+    assert result.engine.startswith("Dask cluster tcp://127.0.0.1:")
+    assert result.outcome(BAD_JOB).status == "failed" and result.outcome(BAD_JOB).stage == "design"
+    assert all(result.outcome(j).status == "ok" for j in [*DESIGN_JOBS, RAW_JOB])
+    assert str(os.getpid()) not in {result.outcome(j).worker.split(":")[1] for j in ALL_JOBS}
+    assert_same_files(job_files(out), job_files(reference[0]))
+    # rerun through the cluster: everything complete is reused, no task needed for those
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        again = run_batch(batch, out, scheduler=cluster.scheduler_address)
+    assert {j for j in ALL_JOBS if again.outcome(j).reused} == {*DESIGN_JOBS, RAW_JOB}
+
+
+def test_unreachable_scheduler_is_a_clear_error(batch: Path, tmp_path: Path) -> None:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    from saucerfab.batch.executors import DaskEngine
+
+    with pytest.raises(ConfigError, match="cannot reach the Dask scheduler"):
+        DaskEngine(f"tcp://127.0.0.1:{port}", connect_timeout=1)
+    with pytest.raises(ConfigError, match="tcp://HOST:PORT"):
+        DaskEngine("127.0.0.1:8786")
+
+
+def test_kill_driver_and_workers_then_resume(batch: Path, reference: tuple[Path, object], tmp_path: Path) -> None:
+    """kill -9 the driver mid-run after a job finished; its workers go too; a rerun
+    reuses every finished job and completes the rest, with the reference's bytes."""
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "saucerfab", "batch", str(batch), "--out", str(out), "--workers", "1"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while not any((out / j / MARKER).is_file() for j in ALL_JOBS):
+            assert proc.poll() is None, proc.stderr.read().decode() if proc.stderr else ""
+            assert time.monotonic() < deadline, "no job finished in time"
+            time.sleep(0.01)
+        children = psutil.Process(proc.pid).children(recursive=True)
+        os.kill(proc.pid, signal.SIGKILL)  # the driver, mid-run
+        proc.wait(timeout=10)
+        # its pool workers notice and leave on their own
+        _, alive = psutil.wait_procs(children, timeout=15)
+        assert not alive, f"worker processes outlived the killed driver: {alive}"
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)  # anything left in its session
+        except ProcessLookupError:
+            pass
+    finished = {j for j in ALL_JOBS if (m := read_marker(out / j)) and m["complete"]}
+    assert finished, "at least one job finished before the kill"
+    assert len(finished) < len(ALL_JOBS) - 1, "the kill came after the batch was done; not mid-run"
+    # what the kill left: complete job folders only, plus hidden temporaries
+    for p in out.iterdir():
+        if p.name.startswith("."):
+            assert p.name in (LOCK_NAME, ".batch-tmp") or p.name.endswith((".part", ".old")), p
+        elif p.is_dir():
+            m = read_marker(p)
+            assert m is not None, f"{p} has no completion marker"
+            if m["complete"]:
+                assert completed(out, p.name, m["key"]) is not None
+        else:
+            assert p.name in (JSON_NAME, HTML_NAME), p
+            if p.name == JSON_NAME:
+                assert json.loads(p.read_text())["state"] == "running"
+
+    resumed = run_batch(batch, out, workers=1)
+    reused = {j for j in ALL_JOBS if resumed.outcome(j).reused}
+    assert reused == finished - {BAD_JOB}
+    assert all(resumed.outcome(j).status == "ok" for j in [*DESIGN_JOBS, RAW_JOB])
+    assert_same_files(job_files(out), job_files(reference[0]))
+    assert_no_temporaries(out)
+
+
+def test_pool_worker_killed_mid_job_is_retried(batch: Path, reference: tuple[Path, object], tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    box: dict[str, object] = {}
+    t = threading.Thread(target=lambda: box.update(result=run_batch(batch, out, workers=1, force=True)))
+    me = psutil.Process()
+    t.start()
+    killed = None
+    deadline = time.monotonic() + 60
+    while killed is None and time.monotonic() < deadline and t.is_alive():
+        for child in me.children(recursive=True):
+            try:
+                if "spawn_main" in " ".join(child.cmdline()) and child.cpu_percent(0.05) > 0:
+                    child.kill()
+                    killed = child.pid
+                    break
+            except psutil.Error:
+                continue
+        time.sleep(0.02)
+    t.join(180)
+    assert killed is not None, "no pool worker to kill"
+    result = box["result"]
+    assert all(result.outcome(j).status == "ok" for j in [*DESIGN_JOBS, RAW_JOB])  # type: ignore[attr-defined]
+    assert_same_files(job_files(out), job_files(reference[0]))
+
+
+def test_cli(batch: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    # only the fast jobs, as CSV
+    csv = batch.parent / "two.csv"
+    csv.write_text(
+        "id,design,printer,cup_diameter_mm,formats,export_options\n"
+        "a-j55,designs/a,j55,80,3mf,texture_px=64\n"
+        "b-bureau,designs/b,bureau,80,obj,texture_px=64; obj_zip=true\n"
+    )
+    assert main(["batch", str(csv), "--out", str(out), "--workers", "0", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["batch", str(csv), "--out", str(out), "--dry-run"]) == 0
+    text = capsys.readouterr().out
+    assert "a-j55" in text and "complete, would be reused" in text
+    assert main(["batch", str(csv), "--out", str(out), "--workers", "0", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["summary"]["reused"] == 2 and report["summary"]["ok"] == 2
+    assert main(["batch", str(csv), "--out", str(out), "--workers", "0"]) == 0
+    assert "a-j55" in capsys.readouterr().out  # the table
+    # a manifest error: exit 2 and a message, nothing run
+    bad = batch.parent / "bad.toml"
+    bad.write_text('[[job]]\nid = "x"\nprinter = "j55"\ncup_diameter_mm = 80\ndesign = "../elsewhere"\n')
+    assert main(["batch", str(bad), "--out", str(tmp_path / "o2"), "--workers", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "outside the manifest's folder" in err
+    assert not (tmp_path / "o2").exists()
+
+
+def test_missing_input_fails_that_job_only(tmp_path: Path) -> None:
+    manifest = make_batch(
+        tmp_path / "b",
+        """
+[defaults]
+printer = "j55"
+cup_diameter_mm = 80
+export_options = { texture_px = 64 }
+
+[[job]]
+id = "fine"
+design = "designs/a"
+
+[[job]]
+id = "gone"
+design = "designs/missing"
+
+[[job]]
+id = "too-big"
+design = "designs/b"
+cup_diameter_mm = 2000
+""",
+    )
+    result = run_batch(manifest, tmp_path / "out", workers=0)
+    assert result.outcome("fine").status == "ok"
+    gone = result.outcome("gone")
+    assert gone.status == "failed" and gone.stage == "inputs" and "does not exist" in gone.reason
+    big = result.outcome("too-big")
+    assert big.status == "failed" and big.stage == "export" and "build volume" in big.reason
+    assert result.exit_code == 1
+
+
+def test_one_batch_per_output_folder_and_stale_temporaries(batch: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".a-j55.x1.part").mkdir()
+    (out / ".a-j55.x1.part" / "half.3mf").write_bytes(b"half")
+    (out / ".batch-report.json.x.part").write_bytes(b"{")
+    (out / "keep.txt").write_text("not ours")
+    with _locked(out):
+        with pytest.raises(ConfigError, match="another saucerfab batch is writing"):
+            run_batch(batch, out, workers=0)
+    csv = batch.parent / "one.csv"
+    csv.write_text("id,design,printer,cup_diameter_mm,export_options\na-j55,designs/a,j55,80,texture_px=64\n")
+    assert run_batch(csv, out, workers=0).exit_code == 0
+    assert_no_temporaries(out)
+    assert (out / "keep.txt").read_text() == "not ours"
