@@ -316,6 +316,9 @@ class Scene:
         cup_diameter_mm: physical width of the real cup across its footprint
             (for a circle, its diameter; ellipse: 2a; prism: 2 * circumradius),
             which fixes the model-to-millimetre scale.
+        reflected2: the frame of a second reflected image (prism cups, two
+            reflections, each in its own facet region); None: the
+            ``reflected`` frame is used for both.
     """
 
     camera: Vec3 = (0.0, -5.5, 5.0)
@@ -324,12 +327,16 @@ class Scene:
     cup: Cup = field(default_factory=CircleCup)
     saucer: Saucer = field(default_factory=Saucer)
     cup_diameter_mm: float = 80.0
+    reflected2: ViewFrame | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "camera", _vec("camera", self.camera, 3))
         _positive("cup_diameter_mm", self.cup_diameter_mm)
         cam = np.array(self.camera)
-        for name, view in (("direct", self.direct), ("reflected", self.reflected)):
+        views = [("direct", self.direct), ("reflected", self.reflected)]
+        if self.reflected2 is not None:
+            views.append(("reflected2", self.reflected2))
+        for name, view in views:
             if np.linalg.norm(np.array(view.target) - cam) < 1e-9:
                 raise ConfigError(f"the {name} view target coincides with the camera {self.camera}")
         if bool(self.cup.contains(cam[:2])):
@@ -400,11 +407,13 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
         }
 
     s = scene.saucer
+    extra = {"reflected2": view(scene.reflected2)} if scene.reflected2 is not None else {}
     return {
         "camera": list(scene.camera),
         "cup_diameter_mm": scene.cup_diameter_mm,
         "direct": view(scene.direct),
         "reflected": view(scene.reflected),
+        **extra,
         "cup": _cup_to_dict(scene.cup),
         "saucer": {
             "x_range": list(s.x_range),
@@ -415,7 +424,7 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
     }
 
 
-_TOP_KEYS = {"camera", "cup_diameter_mm", "direct", "reflected", "cup", "saucer", "preset"}
+_TOP_KEYS = {"camera", "cup_diameter_mm", "direct", "reflected", "reflected2", "cup", "saucer", "preset"}
 
 
 def _check_keys(where: str, d: dict[str, Any], allowed: set[str]) -> None:
@@ -445,11 +454,14 @@ def scene_from_dict(d: dict[str, Any], base: Scene | None = None) -> Scene:
             kw["camera"] = d["camera"]
         if "cup_diameter_mm" in d:
             kw["cup_diameter_mm"] = d["cup_diameter_mm"]
-        for name in ("direct", "reflected"):
+        for name in ("direct", "reflected", "reflected2"):
             if name in d:
                 v = d[name]
+                if not isinstance(v, dict):
+                    raise ConfigError(f"[{name}] must be a table, got {v!r}")
                 _check_keys(f"[{name}]", v, {"target", "viewing_angle_deg", "image_size"})
-                kw[name] = replace(getattr(base, name), **v)
+                start = getattr(base, name) or base.reflected
+                kw[name] = replace(start, **v)
         if "saucer" in d:
             _check_keys("[saucer]", d["saucer"], {"x_range", "y_range", "resolution", "delta"})
             kw["saucer"] = replace(base.saucer, **d["saucer"])
@@ -490,7 +502,9 @@ def scene_to_toml(scene: Scene) -> str:
     lines = ["# saucerfab scene (model units; see saucerfab/scene.py)"]
     for k in ("camera", "cup_diameter_mm"):
         lines.append(f"{k} = {_toml_value(d[k])}")
-    for table in ("direct", "reflected", "cup", "saucer"):
+    for table in ("direct", "reflected", "reflected2", "cup", "saucer"):
+        if table not in d:
+            continue
         lines.append(f"\n[{table}]")
         for k, v in d[table].items():
             lines.append(f"{k} = {_toml_value(v)}")

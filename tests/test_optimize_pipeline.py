@@ -79,3 +79,22 @@ def test_bad_inputs_stop_before_work_and_write_nothing(tmp_path) -> None:
                "--reflected2", str(SAMPLES / "reflected2_moon.png"), "--out", str(out)])
     assert rc == 2  # a second reflection needs a prism cup
     assert not out.exists()
+
+
+def test_ctrl_c_keeps_a_checkpoint_and_resume_gives_the_same_design(small_design, tmp_path) -> None:  # noqa: ANN001
+    from saucerfab.errors import Interrupted
+
+    req, reference = small_design
+    out = tmp_path / "design"
+
+    def interrupt(stage, it, max_it, parts, elapsed):  # noqa: ANN001
+        if stage == "bw_sigma_small":
+            raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted):
+        run_design(req, out, progress=interrupt, log_every_s=0.0)
+    assert not out.exists()  # no half-written design folder
+    assert (tmp_path / ".design.checkpoint" / "state.npz").is_file()
+    run_design(req, out, progress=lambda *a: None)
+    assert not (tmp_path / ".design.checkpoint").exists()
+    assert np.array_equal(np.load(out / "heights.npy"), np.load(reference / "heights.npy"))

@@ -32,7 +32,7 @@ CSV: one header row, then one row per job; columns are the job keys
 an empty cell means "not given", ``formats`` lists names separated by
 spaces or ``;``, and ``design_options`` / ``export_options`` hold
 ``key=value`` pairs separated by ``;`` with TOML values
-(``resolution=40; fast=false; ablation="full"``). Lines starting with ``#``
+(``resolution=40; max_iters=50; ablation="full"``). Lines starting with ``#``
 are comments.
 
 Paths are relative to the manifest's folder and must stay inside it (after

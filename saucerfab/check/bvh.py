@@ -77,15 +77,18 @@ class BVH:
         exclude: np.ndarray,
         t_min: float,
         budget: int,
+        t_max: np.ndarray | None = None,
         chunk: int = 512,
     ) -> tuple[np.ndarray, np.ndarray, bool]:
-        """Nearest hit along each ray beyond ``t_min``, skipping triangle ``exclude[r]``.
+        """Nearest hit along each ray in (``t_min``, ``t_max[r]``], skipping triangle ``exclude[r]``.
 
         Returns (t (R,) with inf for no hit, triangle (R,) with -1, complete):
         ``complete`` is False when ``budget`` (box plus triangle tests) ran out;
         rays not reached keep inf.
         """
         R = len(origins)
+        if t_max is None:
+            t_max = np.full(R, np.inf)
         best = np.full(R, np.inf)
         hit = np.full(R, -1, dtype=np.int64)
         with np.errstate(divide="ignore"):
@@ -108,9 +111,10 @@ class BVH:
                     t1 = (lo - o) * iv
                     t2 = (hi - o) * iv
                 # NaN (0 * inf: ray in a slab's plane) must neither accept nor reject: fmin/fmax skip it
-                tnear = np.fmax.reduce(np.fmin(t1, t2), axis=1)
-                tfar = np.fmin.reduce(np.fmax(t1, t2), axis=1)
-                keep = (tnear <= tfar) & (tfar >= t_min) & np.isfinite(lo[:, 0])
+                a, b = np.fmin(t1, t2), np.fmax(t1, t2)
+                tnear = np.fmax(np.fmax(a[:, 0], a[:, 1]), a[:, 2])
+                tfar = np.fmin(np.fmin(b[:, 0], b[:, 1]), b[:, 2])
+                keep = (tnear <= tfar) & (tfar >= t_min) & (tnear <= t_max[rays]) & np.isfinite(lo[:, 0])
                 rays = rays[keep]
                 node = node[keep]
                 if not len(rays):
@@ -124,7 +128,7 @@ class BVH:
             if used > budget:
                 return best, hit, False
             t = ray_triangle(origins[rays], dirs[rays], tri[t_idx])
-            ok = t > t_min
+            ok = (t > t_min) & (t <= t_max[rays])
             rays, t, t_idx = rays[ok], t[ok], t_idx[ok]
             if len(rays):
                 order = np.lexsort((t, rays))
@@ -180,9 +184,9 @@ def ray_triangle(o: np.ndarray, d: np.ndarray, tri: np.ndarray) -> np.ndarray:
         q = np.cross(s, e1)
         v = np.einsum("ij,ij->i", d, q) * inv
         t = np.einsum("ij,ij->i", e2, q) * inv
-    eps = 1e-12
-    hit = (np.abs(det) > 1e-300) & (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps)
-    return np.where(hit, t, np.nan)
+        eps = 1e-12
+        hit = (np.abs(det) > 1e-300) & (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps)
+        return np.where(hit, t, np.nan)
 
 
 def segment_hits_triangle(p: np.ndarray, q: np.ndarray, tri: np.ndarray, eps_d: float) -> np.ndarray:

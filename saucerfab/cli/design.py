@@ -39,6 +39,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="view frames: the scene's (paper preset), or fitted so each image lands on the saucer (contain) "
         "or the saucer fills each frame (cover)",
     )
+    p.add_argument(
+        "--prism-placement",
+        default="auto",
+        choices=["auto", "as_given"],
+        help="with --reflected2: turn the prism to the placement whose facet regions overlap least (auto)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
@@ -66,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
         max_iters=args.max_iters,
         ablation=args.ablation,
         frames=args.frames,
+        prism_placement=args.prism_placement,
     )
     quiet = (lambda *a: None) if args.quiet else None
     out = run_design(req, args.out, progress=quiet)

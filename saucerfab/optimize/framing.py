@@ -48,12 +48,16 @@ def _refit(cam: Camera, points: np.ndarray, mode: str) -> ViewFrame:
     return ViewFrame(frame_cam.target, frame_cam.viewing_angle_deg, cam.image_size)
 
 
-def fit_frames(scene: Scene, heights: np.ndarray, mode: str = "contain") -> Scene:
-    """A copy of ``scene`` whose two frames are fitted to the saucer and its reflection.
+def fit_frames(
+    scene: Scene, heights: np.ndarray, mode: str = "contain", groups: list[list[int]] | None = None
+) -> Scene:
+    """A copy of ``scene`` whose frames are fitted to the saucer and its reflection.
 
     Args:
         heights: (N, N) base heights (the region barely depends on them).
         mode: "contain" or "cover" (see the module docstring).
+        groups: prism facet groups of two reflected images: the reflected
+            frame is fitted to the first group's region, ``reflected2`` to the second.
     """
     from saucerfab.mirror import reflect
 
@@ -62,12 +66,25 @@ def fit_frames(scene: Scene, heights: np.ndarray, mode: str = "contain") -> Scen
     grid = make_grid(scene.saucer)
     h = np.asarray(heights, np.float64).reshape(-1)
     direct = _refit(Camera.from_scene(scene, "direct"), grid.vertices(h), mode)
-    pts = []
-    for piece in reflect(scene, grid.xy()):
-        ok = piece.valid(h, scene.cup.height)
-        pts.append(piece.reflected_vertices(h)[ok])
-    allp = np.concatenate(pts) if pts else np.zeros((0, 3))
-    if allp.shape[0] < 3:
-        raise ConfigError("no part of the saucer is seen in the cup; move the saucer or the camera")
-    reflected = _refit(Camera.from_scene(scene, "reflected"), allp, mode)
-    return replace(scene, direct=direct, reflected=reflected)
+    pieces = reflect(scene, grid.xy())
+
+    def region(facets: list[int] | None) -> np.ndarray:
+        pts = [
+            p.reflected_vertices(h)[p.valid(h, scene.cup.height)]
+            for p in pieces
+            if facets is None or p.facet in facets
+        ]
+        allp = np.concatenate(pts) if pts else np.zeros((0, 3))
+        if allp.shape[0] < 3:
+            raise ConfigError("no part of the saucer is seen in the cup; move the saucer or the camera")
+        return allp
+
+    cam_r = Camera.from_scene(scene, "reflected")
+    if groups is None:
+        return replace(scene, direct=direct, reflected=_refit(cam_r, region(None), mode))
+    return replace(
+        scene,
+        direct=direct,
+        reflected=_refit(cam_r, region(groups[0]), mode),
+        reflected2=_refit(cam_r, region(groups[1]), mode),
+    )

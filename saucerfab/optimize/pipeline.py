@@ -54,6 +54,8 @@ class Prepared:
         masks: view name -> (S, S) bool foreground mask.
         inputs: names and sha256 of the input files.
         reflected_groups: prism facet groups in two-reflection mode, else None.
+        placement: in two-reflection mode, the prism placement chosen and
+            the region overlap of each option.
     """
 
     scene: Scene
@@ -64,6 +66,7 @@ class Prepared:
     masks: dict[str, np.ndarray]
     inputs: dict[str, Any]
     reflected_groups: list[list[int]] | None
+    placement: dict[str, Any] | None = None
 
 
 def build_scene(request: DesignRequest) -> Scene:
@@ -96,10 +99,22 @@ def prepare(request: DesignRequest) -> Prepared:
         )
     n = scene.saucer.resolution
     base = load_shape(request.shape, n, height_scale=request.height_scale, seed=request.seed)
+    groups: list[list[int]] | None = None
+    placement: dict[str, Any] = {}
+    if request.reflected2 is not None:
+        from saucerfab.mirror import split_reflected_facets
+        from saucerfab.optimize.regions import best_placement, region_report
+
+        if request.prism_placement == "auto":
+            scene, pick, reports = best_placement(scene, base)
+            placement = {"placement": pick, "options": {k: r.to_dict() for k, r in reports.items()}}
+        else:
+            placement = {"placement": "as_given", "options": {"as_given": region_report(scene, base).to_dict()}}
+        groups = split_reflected_facets(scene, base)
     if request.frames != "scene":
         from saucerfab.optimize.framing import fit_frames
 
-        scene = fit_frames(scene, base, request.frames)
+        scene = fit_frames(scene, base, request.frames, groups)
     s = scene.direct.image_size
     t = int(min(TEXTURE_MAX, max(1024, s)))
     names = ["direct", "reflected"] + (["reflected2"] if request.reflected2 is not None else [])
@@ -132,14 +147,10 @@ def prepare(request: DesignRequest) -> Prepared:
     if len(names) == 2:
         e_d, e_r = im.black_white_targets(masks["direct"], masks["reflected"])
         enhanced = {"direct": e_d, "reflected": e_r}
-        groups = None
     else:
         e = im.solid_colour_targets([masks[k] for k in names])
         enhanced = dict(zip(names, e))
-        from saucerfab.mirror import split_reflected_facets
-
-        groups = split_reflected_facets(scene, base)
-    return Prepared(scene, base, render, texture, enhanced, masks, inputs, groups)
+    return Prepared(scene, base, render, texture, enhanced, masks, inputs, groups, placement or None)
 
 
 def request_hash(request: DesignRequest, prepared: Prepared) -> str:
@@ -276,6 +287,8 @@ def run_design(
     c = torch.full((rig.num_faces, 3), 0.5, dtype=dtype)
     log: list[dict[str, Any]] = []
     metrics: dict[str, Any] = {"stages": [], "rho": rho, "weights": weights, "setup_s": t_setup}
+    if prep.placement:
+        metrics["prism_placement"] = prep.placement
     first = 0
     resumed = ckpt.load()
     if resumed is not None:
@@ -327,7 +340,10 @@ def run_design(
         try:
             res = solve(objective, h, c, z, delta, settings, prox=prox, callback=cb)
         except KeyboardInterrupt:
-            ckpt.save(si, h.numpy(), c.numpy(), log, metrics, weights)
+            # Save the state this stage started from: resuming re-runs the
+            # stage from there, which gives exactly the uninterrupted result.
+            done_log = [e for e in log if e["stage"] != spec.name]
+            ckpt.save(si, h.numpy(), c.numpy(), done_log, metrics, weights)
             raise Interrupted(
                 f"interrupted in stage {spec.name}; the last finished stage is saved in {ckpt.dir}. "
                 "Run the same command again to resume."

@@ -31,10 +31,13 @@ class DesignRequest:
         max_iters: iteration cap per stage.
         ablation: one of "full" (the paper's method), "no_deform", "laplacian",
             "laplacian_bw", "sparse_only", "laplacian_sparse" (Figure 11 a-f).
-        fast: coarse-to-fine and other speed-ups on (False: the paper as written).
         frames: "scene" keeps the scene's view frames (the paper's preset);
             "contain" / "cover" re-aim them at the saucer and its reflection
             (:mod:`saucerfab.optimize.framing`).
+        prism_placement: with a second reflected image, "auto" turns the
+            prism to the placement whose facet regions overlap least
+            (:func:`saucerfab.optimize.regions.best_placement`); "as_given"
+            keeps the cup's rotation.
     """
 
     direct: Path
@@ -55,8 +58,8 @@ class DesignRequest:
     lam: float | None = None
     max_iters: int = 400
     ablation: str = "full"
-    fast: bool = True
     frames: str = "scene"
+    prism_placement: str = "auto"
     extra: dict[str, Any] = field(default_factory=dict)
 
     ABLATIONS = ("full", "no_deform", "laplacian", "laplacian_bw", "sparse_only", "laplacian_sparse")
@@ -70,6 +73,8 @@ class DesignRequest:
             raise ConfigError(f"unknown ablation {self.ablation!r}; use one of {self.ABLATIONS}")
         if self.frames not in ("scene", "contain", "cover"):
             raise ConfigError(f"frames must be 'scene', 'contain' or 'cover', got {self.frames!r}")
+        if self.prism_placement not in ("auto", "as_given"):
+            raise ConfigError(f"prism_placement must be 'auto' or 'as_given', got {self.prism_placement!r}")
         if self.max_iters < 1:
             raise ConfigError(f"max_iters must be at least 1, got {self.max_iters}")
         for name in ("w_large", "w_small", "lam"):

@@ -92,7 +92,6 @@ class Rig:
         size_d = image_size or scene.direct.image_size
         size_r = image_size or scene.reflected.image_size
         cam_d = Camera.from_scene(scene, "direct").with_size(size_d)
-        cam_r = Camera.from_scene(scene, "reflected").with_size(size_r)
         self.views: list[View] = [
             View(
                 "direct",
@@ -136,7 +135,7 @@ class Rig:
             self.views.append(
                 View(
                     name,
-                    cam_r,
+                    Camera.from_scene(scene, name).with_size(size_r),
                     torch.as_tensor(np.concatenate(xs)),
                     torch.as_tensor(np.concatenate(srcs)),
                     torch.as_tensor(np.concatenate(faces)),

@@ -48,8 +48,9 @@ class Camera:
 
     @classmethod
     def from_scene(cls, scene, view: str) -> "Camera":  # type: ignore[no-untyped-def]
-        """The camera of ``scene``'s ``view`` ("direct" or "reflected")."""
-        frame = getattr(scene, view)
+        """The camera of ``scene``'s ``view`` ("direct", "reflected" or "reflected2";
+        a scene without its own reflected2 frame uses the reflected one)."""
+        frame = getattr(scene, view, None) or scene.reflected
         return cls(tuple(scene.camera), tuple(frame.target), frame.viewing_angle_deg, frame.image_size)
 
     def with_size(self, size: int) -> "Camera":

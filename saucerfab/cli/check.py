@@ -1,0 +1,68 @@
+"""``saucerfab check FILE...``: will these meshes print? For people, CI systems and bureaus.
+
+Exit code: 0 all printable, 1 some not printable, 2 some unreadable or not a
+mesh (the largest over the files). A table (or ``--json``, schema
+``saucerfab.check/1``; ``--junit FILE`` as well) and a summary line.
+This module imports nothing heavy at import time: ``saucerfab --help``
+loads it, and ``saucerfab check`` must start fast without torch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+HELP = "check mesh files (3MF, OBJ, STL, PLY, GLB, VRML) for printability; exit 0/1/2"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("files", nargs="*", metavar="FILE", help="mesh files to check")
+    p.add_argument("--printer", metavar="NAME", help="check against a printer profile (key or .toml path)")
+    p.add_argument("--json", action="store_true", help="print the saucerfab.check/1 JSON document instead of a table")
+    p.add_argument("--junit", metavar="FILE", help="also write a JUnit XML report to FILE")
+    p.add_argument("--strict", action="store_true", help="warnings fail too (exit 1)")
+    p.add_argument("--max-triangles", type=int, metavar="N",
+                   help="refuse files over N triangles (default 5,000,000) as too large to check")
+    p.add_argument("--min-wall", type=float, metavar="MM",
+                   help="warn about walls under MM when no --printer gives a minimum")
+    p.add_argument("--schema", action="store_true", help="print the JSON Schema of --json output and exit")
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    from saucerfab.check import JSON_SCHEMA, Limits, check_many, reports_to_json, reports_to_junit, summary_line
+    from saucerfab.errors import ConfigError
+
+    if args.schema:
+        print(json.dumps(JSON_SCHEMA, indent=2))
+        return 0
+    if not args.files:
+        raise ConfigError("give one or more mesh files to check (saucerfab check FILE...)")
+    changes: dict[str, object] = {}
+    if args.max_triangles is not None:
+        if args.max_triangles <= 0:
+            raise ConfigError(f"--max-triangles must be positive, got {args.max_triangles}")
+        changes["max_triangles"] = args.max_triangles
+    if args.min_wall is not None:
+        if not args.min_wall > 0:
+            raise ConfigError(f"--min-wall must be positive millimetres, got {args.min_wall}")
+        changes["min_wall_mm"] = args.min_wall
+    limits = Limits().with_(**changes)
+    reports = check_many(args.files, printer=args.printer, limits=limits, strict=args.strict)
+    if args.junit:
+        from saucerfab.fileio import write_text_atomic
+
+        try:
+            write_text_atomic(args.junit, reports_to_junit(reports))
+        except OSError as exc:
+            raise ConfigError(f"cannot write --junit {args.junit!r}: {exc.strerror or exc}") from None
+    if args.json:
+        sys.stdout.write(reports_to_json(reports) + "\n")
+        print(summary_line(reports), file=sys.stderr)
+    else:
+        from saucerfab.check.report import render_table
+
+        render_table(reports)
+        print(summary_line(reports))
+    return max(r.exit_code for r in reports)
