@@ -31,7 +31,7 @@ def _part1by2(x: np.ndarray) -> np.ndarray:
 
 @dataclass
 class BVH:
-    """Boxes per level: ``lo[d]``, ``hi[d]`` have 2**d rows; leaves (level D) hold ``leaf_tri``."""
+    """Boxes per level: ``lo[d]``, ``hi[d]`` are (3, 2**d), axis-major; leaves (level D) hold ``leaf_tri``."""
 
     lo: list[np.ndarray]
     hi: list[np.ndarray]
@@ -59,11 +59,12 @@ class BVH:
         hi = np.full((P, 3), -np.inf)
         lo[:m] = tlo[order]
         hi[:m] = thi[order]
+        lo, hi = np.ascontiguousarray(lo.T), np.ascontiguousarray(hi.T)  # axis-major (3, P)
         los = [lo]
         his = [hi]
         for _ in range(depth):
-            lo = np.minimum(lo[0::2], lo[1::2])
-            hi = np.maximum(hi[0::2], hi[1::2])
+            lo = np.minimum(lo[:, 0::2], lo[:, 1::2])
+            hi = np.maximum(hi[:, 0::2], hi[:, 1::2])
             los.append(lo)
             his.append(hi)
         return cls(lo=los[::-1], hi=his[::-1], leaf_tri=leaf_tri, depth=depth)
@@ -103,18 +104,20 @@ class BVH:
                 used += len(rays)
                 if used > budget:
                     return best, hit, False
-                lo = self.lo[d][node]
-                hi = self.hi[d][node]
-                o = origins[rays]
-                iv = inv[rays]
+                lo = self.lo[d]
+                hi = self.hi[d]
+                tnear = np.full(len(rays), -np.inf)
+                tfar = t_max[rays].copy()
                 with np.errstate(invalid="ignore"):
-                    t1 = (lo - o) * iv
-                    t2 = (hi - o) * iv
-                # NaN (0 * inf: ray in a slab's plane) must neither accept nor reject: fmin/fmax skip it
-                a, b = np.fmin(t1, t2), np.fmax(t1, t2)
-                tnear = np.fmax(np.fmax(a[:, 0], a[:, 1]), a[:, 2])
-                tfar = np.fmin(np.fmin(b[:, 0], b[:, 1]), b[:, 2])
-                keep = (tnear <= tfar) & (tfar >= t_min) & (tnear <= t_max[rays]) & np.isfinite(lo[:, 0])
+                    for ax in range(3):
+                        o = origins[rays, ax]
+                        iv = inv[rays, ax]
+                        t1 = (lo[ax, node] - o) * iv
+                        t2 = (hi[ax, node] - o) * iv
+                        # NaN (0 * inf: a ray in a slab's plane) neither accepts nor rejects: fmin/fmax skip it
+                        tnear = np.fmax(tnear, np.fmin(t1, t2))
+                        tfar = np.fmin(tfar, np.fmax(t1, t2))
+                keep = (tnear <= tfar) & (tfar >= t_min) & np.isfinite(lo[0, node])
                 rays = rays[keep]
                 node = node[keep]
                 if not len(rays):
@@ -161,7 +164,10 @@ class BVH:
             if used > budget:
                 return np.zeros(0, np.int64), np.zeros(0, np.int64), False
             lo, hi = self.lo[d], self.hi[d]
-            ov = np.all((lo[a2] <= hi[b2] + tol) & (lo[b2] <= hi[a2] + tol), axis=1)
+            ov = np.ones(len(a2), dtype=bool)
+            for ax in range(3):
+                la, ha, lb, hb = lo[ax, a2], hi[ax, a2], lo[ax, b2], hi[ax, b2]
+                ov &= (la <= hb + tol) & (lb <= ha + tol)
             a, b = a2[ov], b2[ov]
             if not len(a):
                 break

@@ -7,9 +7,11 @@ Two loops that are gather-heavy and so slow in numpy (5 s and 3 s on a
   coordinates from the cell fractions, interpolated design uv, bilinear
   texture sample. Its slow reference is
   :func:`saucerfab.fabricate.bake.bake_top_reference`.
-* :func:`sor_sweeps` - red-black successive over-relaxation of Laplace's
-  equation on the unknown texels. Its reference is the direct sparse solve
-  :func:`saucerfab.fabricate.bake.harmonic_fill_reference`.
+* :func:`sor_sweeps` and :func:`residual` - red-black successive
+  over-relaxation and the residual of the (masked) Poisson equation, the
+  smoother and the residual of the multigrid in
+  :func:`saucerfab.fabricate.bake.harmonic_fill`. Their reference is the
+  direct sparse solve :func:`saucerfab.fabricate.bake.harmonic_fill_reference`.
 
 Compiled code is cached on disk (``cache=True``), so only the first run on a
 machine pays the compile time (about 2 s).
@@ -84,15 +86,16 @@ def bake_cells(
 
 
 @njit(parallel=True, cache=True)
-def sor_sweeps(x: np.ndarray, known: np.ndarray, sweeps: int, omega: float) -> None:
-    """In-place red-black SOR sweeps of the 4-neighbour Laplace equation on unknown texels.
+def sor_sweeps(x: np.ndarray, rhs: np.ndarray, known: np.ndarray, sweeps: int, omega: float) -> None:
+    """In-place red-black SOR sweeps of ``deg(p) x_p - sum_{q~p} x_q = rhs_p`` on unknown texels.
 
-    Neighbours outside the array are left out (zero normal derivative at
-    the edge). Rows of one colour are independent, so each half-sweep runs
-    in parallel over rows.
+    4-neighbours inside the array only (zero normal derivative at the edge;
+    ``deg`` is 2, 3 or 4). Rows of one colour are independent, so each
+    half-sweep runs in parallel over rows.
 
     Args:
         x: (h, w, C) float32 values; known texels are never changed.
+        rhs: (h, w, C) float32 right-hand side (zero for Laplace's equation).
         known: (h, w) bool.
     """
     h, w, nc = x.shape
@@ -102,9 +105,8 @@ def sor_sweeps(x: np.ndarray, known: np.ndarray, sweeps: int, omega: float) -> N
                 for c in range((r + colour) % 2, w, 2):
                     if known[r, c]:
                         continue
-                    cnt = 0
                     for ch in range(nc):
-                        s = 0.0
+                        s = rhs[r, c, ch]
                         cnt = 0
                         if r > 0:
                             s += x[r - 1, c, ch]
@@ -119,3 +121,30 @@ def sor_sweeps(x: np.ndarray, known: np.ndarray, sweeps: int, omega: float) -> N
                             s += x[r, c + 1, ch]
                             cnt += 1
                         x[r, c, ch] += omega * (s / cnt - x[r, c, ch])
+
+
+@njit(parallel=True, cache=True)
+def residual(x: np.ndarray, rhs: np.ndarray, known: np.ndarray, out: np.ndarray) -> None:
+    """``out = rhs - (deg x - sum of neighbours)`` on unknown texels, 0 on known ones."""
+    h, w, nc = x.shape
+    for r in prange(h):
+        for c in range(w):
+            for ch in range(nc):
+                if known[r, c]:
+                    out[r, c, ch] = 0.0
+                    continue
+                s = 0.0
+                cnt = 0
+                if r > 0:
+                    s += x[r - 1, c, ch]
+                    cnt += 1
+                if r < h - 1:
+                    s += x[r + 1, c, ch]
+                    cnt += 1
+                if c > 0:
+                    s += x[r, c - 1, ch]
+                    cnt += 1
+                if c < w - 1:
+                    s += x[r, c + 1, ch]
+                    cnt += 1
+                out[r, c, ch] = rhs[r, c, ch] - (cnt * x[r, c, ch] - s)

@@ -47,11 +47,15 @@ if TYPE_CHECKING:
 
 #: pixels per vectorized inner loop: one AVX2 register of float32
 LANES = 8
-#: tile size in pixels; TILE_W is a multiple of LANES so lane groups never leave a tile
-TILE_W = 32
+#: tile size in pixels (wide, so few faces' column spans are cut in two)
+TILE_W = 64
 TILE_H = 16
-#: pixels per tile; the per-pixel state fields of a tile are NLOC apart in one array
-NLOC = TILE_H * TILE_W
+#: row stride of the tile-local state: room for a lane group starting at the last column
+SW = TILE_W + LANES
+#: distance between the fields of the tile-local state
+NLOC = TILE_H * SW
+#: per-column gradient accumulators of the backward
+N_ACC = 18
 #: gradient slots per (face, tile): 6 corner xy, 9 barycentric matrix, 3 inverse depths, 3 colours
 N_GRAD = 21
 
@@ -138,6 +142,28 @@ def _bin_faces(box: np.ndarray, n_ty: int, n_tx: int):  # type: ignore[no-untype
 
 
 # --------------------------------------------------------------------------- forward
+#
+# Tile-local per-pixel state: one array, field k of pixel (row i, column j of
+# the tile) at k * NLOC + i * SW + j. One array with fields a compile-time
+# constant apart lets LLVM prove the accesses independent; separate arrays
+# would each need a run-time overlap check, more than it will emit. Rows are
+# SW = TILE_W + LANES wide: a face's span of columns is processed in whole
+# lane groups from its first column, and the lanes past the tile's last
+# column land in the padding, which is never read back.
+
+
+@njit(**_OPTS)
+def _face_consts(f, cxy, ee_min, one):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Corner x, y and edge vectors of face f, and 1/|edge|^2 (degenerate edges
+    project onto their start, as the torch backend's clamp makes them)."""
+    ax0, ay0, ax1, ay1, ax2, ay2 = cxy[f, 0], cxy[f, 1], cxy[f, 2], cxy[f, 3], cxy[f, 4], cxy[f, 5]
+    ex0, ey0 = ax1 - ax0, ay1 - ay0
+    ex1, ey1 = ax2 - ax1, ay2 - ay1
+    ex2, ey2 = ax0 - ax2, ay0 - ay2
+    ie0 = one / max(ex0 * ex0 + ey0 * ey0, ee_min)
+    ie1 = one / max(ex1 * ex1 + ey1 * ey1, ee_min)
+    ie2 = one / max(ex2 * ex2 + ey2 * ey2, ee_min)
+    return ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2
 
 
 @njit(**_OPTS)
@@ -151,12 +177,9 @@ def _forward_tile(
     zero, one = K[K_ZERO], K[K_ONE]
     thr, inv_sigma, near, far = K[K_THR], K[K_INV_SIGMA], K[K_NEAR], K[K_FAR]
     inv_fr, inv_gamma, wsum_min, ee_min = K[K_INV_FR], K[K_INV_GAMMA], K[K_WSUM], K[K_EE_MIN]
-    # Per-pixel state, one field every NLOC entries of one array: LLVM sees
-    # constant distances between the fields and needs no runtime alias checks
-    # (separate arrays would need one per pair, more than it will emit).
-    # Fields: 0 running max, 1 running sum, 2-4 colour sums, 5 prod(1 - D).
+    # fields: 0 running max, 1 running sum, 2-4 colour sums, 5 prod(1 - D).
+    # SoftRas's start: maximum eps, sum exp(eps/gamma), colour background * sum.
     st = np.empty(6 * NLOC, K.dtype)
-    # SoftRas's start: running maximum eps, running sum exp(eps/gamma), colour bg * sum
     for q in range(NLOC):
         st[q] = K[K_EPS]
         st[NLOC + q] = K[K_SUM0]
@@ -171,35 +194,26 @@ def _forward_tile(
         ca, cbx = max(box[f, 2], ct0), min(box[f, 3], ct0 + TILE_W - 1)
         if rb < ra or cbx < ca:
             continue
-        ax0, ay0, ax1, ay1, ax2, ay2 = cxy[f, 0], cxy[f, 1], cxy[f, 2], cxy[f, 3], cxy[f, 4], cxy[f, 5]
-        ex0, ey0 = ax1 - ax0, ay1 - ay0
-        ex1, ey1 = ax2 - ax1, ay2 - ay1
-        ex2, ey2 = ax0 - ax2, ay0 - ay2
-        # degenerate edges project onto their start (as the torch backend's clamp)
-        ie0 = one / max(ex0 * ex0 + ey0 * ey0, ee_min)
-        ie1 = one / max(ex1 * ex1 + ey1 * ey1, ee_min)
-        ie2 = one / max(ex2 * ex2 + ey2 * ey2, ee_min)
+        ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2 = _face_consts(
+            f, cxy, ee_min, one
+        )
         i00, i01, i02 = inv[f, 0], inv[f, 1], inv[f, 2]
         i10, i11, i12 = inv[f, 3], inv[f, 4], inv[f, 5]
         i20, i21, i22 = inv[f, 6], inv[f, 7], inv[f, 8]
         iz0, iz1, iz2 = iz[f, 0], iz[f, 1], iz[f, 2]
         fr, fg, fb = col[f, 0], col[f, 1], col[f, 2]
-        # whole lane groups: pixels past the face's box fail the distance test
-        # exactly as pixels outside it do, and the loop has no remainder
-        cs0 = ca - (ca % LANES)
-        cs1 = cbx + 1 + (-(cbx + 1)) % LANES
-        n = cs1 - cs0
-        pxv = px_tab[cs0:cs1]
+        # whole lane groups: a fixed-width loop without remainder
+        n = (cbx - ca + LANES) // LANES * LANES
+        pxv = px_tab[ca:]
         for r in range(ra, rb + 1):
             py = py_tab[r]
             b0 = i01 * py + i02
             b1 = i11 * py + i12
             b2 = i21 * py + i22
             hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
-            o = (r - rt0) * TILE_W + cs0 - ct0
             # a view indexed by the loop counter plus constants: no negative-index
             # wraparound, so LLVM sees unit-stride accesses and vectorizes
-            sv = st[o:]
+            sv = st[(r - rt0) * SW + (ca - ct0):]
             for lane in range(n):
                 px = pxv[lane]
                 w0 = i00 * px + b0
@@ -208,18 +222,15 @@ def _forward_tile(
                 inside = (w0 > zero) & (w0 < one) & (w1 > zero) & (w1 < one) & (w2 > zero) & (w2 < one)
                 # squared distance to the closed triangle = nearest of the three segments
                 hx = px - ax0
-                tt = (hx * ex0 + hy0 * ey0) * ie0
-                tt = min(max(tt, zero), one)
+                tt = min(max((hx * ex0 + hy0 * ey0) * ie0, zero), one)
                 dx, dy = tt * ex0 - hx, tt * ey0 - hy0
                 d2 = dx * dx + dy * dy
                 hx = px - ax1
-                tt = (hx * ex1 + hy1 * ey1) * ie1
-                tt = min(max(tt, zero), one)
+                tt = min(max((hx * ex1 + hy1 * ey1) * ie1, zero), one)
                 dx, dy = tt * ex1 - hx, tt * ey1 - hy1
                 d2 = min(d2, dx * dx + dy * dy)
                 hx = px - ax2
-                tt = (hx * ex2 + hy2 * ey2) * ie2
-                tt = min(max(tt, zero), one)
+                tt = min(max((hx * ex2 + hy2 * ey2) * ie2, zero), one)
                 dx, dy = tt * ex2 - hx, tt * ey2 - hy2
                 d2 = min(d2, dx * dx + dy * dy)
                 valid = inside | (d2 < thr)
@@ -235,8 +246,7 @@ def _forward_tile(
                 wc1 = min(max(w1, zero), one)
                 wc2 = min(max(w2, zero), one)
                 sw = max(wc0 + wc1 + wc2, wsum_min)
-                zq = (wc0 * iz0 + wc1 * iz1 + wc2 * iz2) / sw
-                z = one / zq
+                z = sw / (wc0 * iz0 + wc1 * iz1 + wc2 * iz2)
                 rgb = valid & (z >= near) & (z <= far)
                 zn = (far - z) * inv_fr
                 # online softmax with SoftRas's running maximum, one exp per pair
@@ -255,11 +265,12 @@ def _forward_tile(
 
     for r in range(rt0, min(rt0 + TILE_H, size)):
         for c in range(ct0, min(ct0 + TILE_W, size)):
-            q = (r - rt0) * TILE_W + (c - ct0)
+            q = (r - rt0) * SW + (c - ct0)
             g = r * wp + c
-            image[r, c, 0] = st[2 * NLOC + q] / st[NLOC + q]
-            image[r, c, 1] = st[3 * NLOC + q] / st[NLOC + q]
-            image[r, c, 2] = st[4 * NLOC + q] / st[NLOC + q]
+            rs = one / st[NLOC + q]
+            image[r, c, 0] = st[2 * NLOC + q] * rs
+            image[r, c, 1] = st[3 * NLOC + q] * rs
+            image[r, c, 2] = st[4 * NLOC + q] * rs
             alpha[r, c] = one - st[5 * NLOC + q]
             st_m[g] = st[q]
             st_s[g] = st[NLOC + q]
@@ -283,6 +294,24 @@ def _forward(
 # --------------------------------------------------------------------------- backward
 
 
+@njit(error_model="numpy", cache=True, nogil=True, fastmath={"contract", "reassoc"})
+def _lane_sum(a, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """sum(a[:n]); reassociation lets LLVM vectorize it (same code, same order: deterministic)."""
+    tot = a[0] - a[0]
+    for k in range(n):
+        tot += a[k]
+    return tot
+
+
+@njit(error_model="numpy", cache=True, nogil=True, fastmath={"contract", "reassoc"})
+def _lane_dot(a, b, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """sum(a[:n] * b[:n]), vectorized as :func:`_lane_sum`."""
+    tot = a[0] - a[0]
+    for k in range(n):
+        tot += a[k] * b[k]
+    return tot
+
+
 @njit(**_OPTS)
 def _backward_tile(
     t, n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col, px_tab, py_tab, K,
@@ -295,13 +324,12 @@ def _backward_tile(
     two = one + one
     thr, inv_sigma, near, far = K[K_THR], K[K_INV_SIGMA], K[K_NEAR], K[K_FAR]
     inv_fr, inv_gamma, wsum_min, ee_min = K[K_INV_FR], K[K_INV_GAMMA], K[K_WSUM], K[K_EE_MIN]
-    # per pixel, one field every NLOC entries (see _forward_tile): 0 the softmax
-    # maximum, 1-3 dL/dimage / sum, 4 sum_k dL/dimage_k image_k / sum,
-    # 5 dL/dalpha * prod(1 - D)
+    # fields (layout as in _forward_tile): 0 the softmax maximum, 1-3 dL/dimage / sum,
+    # 4 sum_k dL/dimage_k image_k / sum, 5 dL/dalpha * prod(1 - D)
     st = np.zeros(6 * NLOC, K.dtype)
     for r in range(rt0, min(rt0 + TILE_H, size)):
         for c in range(ct0, min(ct0 + TILE_W, size)):
-            q = (r - rt0) * TILE_W + (c - ct0)
+            q = (r - rt0) * SW + (c - ct0)
             g = r * wp + c
             rs = one / st_s[g]
             a0, a1, a2 = g_image[r, c, 0] * rs, g_image[r, c, 1] * rs, g_image[r, c, 2] * rs
@@ -310,9 +338,12 @@ def _backward_tile(
             st[4 * NLOC + q] = a0 * image[r, c, 0] + a1 * image[r, c, 1] + a2 * image[r, c, 2]
             st[5 * NLOC + q] = g_alpha[r, c] * st_p[g]
 
-    # gradient accumulators per tile column (the sums over rows stay elementwise,
-    # so they vectorize without reassociation); reduced once per entry
-    acc = np.zeros(N_GRAD * TILE_W, K.dtype)
+    # Gradient accumulators per column of the face's span, summed over its rows
+    # elementwise (vectorizes without reassociation), reduced once per entry.
+    # Slots 0-5: corner x, y; 6-8: sum of dL/dw_k (times px at the reduction:
+    # the matrix row's x and constant terms); 9-11: sum of dL/dw_k * py;
+    # 12-14: inverse depths; 15-17: colours.
+    acc = np.zeros(N_ACC * SW, K.dtype)
     for idx in range(tile_start[t], tile_start[t + 1]):
         entry = tile_entry[idx]
         f = entry_face[entry]
@@ -322,33 +353,25 @@ def _backward_tile(
             for j in range(N_GRAD):
                 grad[entry, j] = zero
             continue
-        cs0 = ca - (ca % LANES)
-        cs1 = cbx + 1 + (-(cbx + 1)) % LANES
-        n = cs1 - cs0
-        a0 = cs0 - ct0
+        n = (cbx - ca + LANES) // LANES * LANES
         acc[:] = zero
-        av = acc[a0:]  # gradient j of column a0 + lane is av[j * TILE_W + lane]
-        ax0, ay0, ax1, ay1, ax2, ay2 = cxy[f, 0], cxy[f, 1], cxy[f, 2], cxy[f, 3], cxy[f, 4], cxy[f, 5]
-        ex0, ey0 = ax1 - ax0, ay1 - ay0
-        ex1, ey1 = ax2 - ax1, ay2 - ay1
-        ex2, ey2 = ax0 - ax2, ay0 - ay2
-        ie0 = one / max(ex0 * ex0 + ey0 * ey0, ee_min)
-        ie1 = one / max(ex1 * ex1 + ey1 * ey1, ee_min)
-        ie2 = one / max(ex2 * ex2 + ey2 * ey2, ee_min)
+        av = acc[ca - ct0:]  # accumulator j of lane k is av[j * SW + k]
+        ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2 = _face_consts(
+            f, cxy, ee_min, one
+        )
         i00, i01, i02 = inv[f, 0], inv[f, 1], inv[f, 2]
         i10, i11, i12 = inv[f, 3], inv[f, 4], inv[f, 5]
         i20, i21, i22 = inv[f, 6], inv[f, 7], inv[f, 8]
         iz0, iz1, iz2 = iz[f, 0], iz[f, 1], iz[f, 2]
         fr, fg, fb = col[f, 0], col[f, 1], col[f, 2]
-        pxv = px_tab[cs0:cs1]
+        pxv = px_tab[ca:]
         for r in range(ra, rb + 1):
             py = py_tab[r]
             b0 = i01 * py + i02
             b1 = i11 * py + i12
             b2 = i21 * py + i22
             hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
-            o = (r - rt0) * TILE_W + a0
-            sv = st[o:]
+            sv = st[(r - rt0) * SW + (ca - ct0):]
             for lane in range(n):
                 px = pxv[lane]
                 w0 = i00 * px + b0
@@ -357,14 +380,12 @@ def _backward_tile(
                 inside = (w0 > zero) & (w0 < one) & (w1 > zero) & (w1 < one) & (w2 > zero) & (w2 < one)
                 # nearest segment, keeping which edge and where on it (t) for the gradient
                 hx = px - ax0
-                tt = (hx * ex0 + hy0 * ey0) * ie0
-                tt = min(max(tt, zero), one)
+                tt = min(max((hx * ex0 + hy0 * ey0) * ie0, zero), one)
                 dx, dy = tt * ex0 - hx, tt * ey0 - hy0
                 d2 = dx * dx + dy * dy
                 bt, bdx, bdy = tt, dx, dy
                 hx = px - ax1
-                tt = (hx * ex1 + hy1 * ey1) * ie1
-                tt = min(max(tt, zero), one)
+                tt = min(max((hx * ex1 + hy1 * ey1) * ie1, zero), one)
                 dx, dy = tt * ex1 - hx, tt * ey1 - hy1
                 dd = dx * dx + dy * dy
                 e1sel = dd < d2
@@ -373,8 +394,7 @@ def _backward_tile(
                 bdx = dx if e1sel else bdx
                 bdy = dy if e1sel else bdy
                 hx = px - ax2
-                tt = (hx * ex2 + hy2 * ey2) * ie2
-                tt = min(max(tt, zero), one)
+                tt = min(max((hx * ex2 + hy2 * ey2) * ie2, zero), one)
                 dx, dy = tt * ex2 - hx, tt * ey2 - hy2
                 dd = dx * dx + dy * dy
                 e2sel = dd < d2
@@ -396,14 +416,15 @@ def _backward_tile(
                 wc2 = min(max(w2, zero), one)
                 rsw = wc0 + wc1 + wc2
                 sw = max(rsw, wsum_min)
-                zq = (wc0 * iz0 + wc1 * iz1 + wc2 * iz2) / sw
-                z = one / zq
+                rnum = one / (wc0 * iz0 + wc1 * iz1 + wc2 * iz2)
+                z = sw * rnum
                 rgb = valid & (z >= near) & (z <= far)
                 zn = (far - z) * inv_fr
                 ez = vexp(min(zn - sv[lane], zero) * inv_gamma)
                 wf = cov * ez
                 wf = wf if rgb else zero  # the pair's softmax weight, shifted by the max
-                gw = sv[NLOC + lane] * fr + sv[2 * NLOC + lane] * fg + sv[3 * NLOC + lane] * fb - sv[4 * NLOC + lane]  # dL/dweight * sum
+                gw = sv[NLOC + lane] * fr + sv[2 * NLOC + lane] * fg + sv[3 * NLOC + lane] * fb
+                gw = gw - sv[4 * NLOC + lane]  # dL/dweight * sum
                 # dL/dxs: alpha through prod(1 - D), colour through the weight
                 ga = sv[5 * NLOC + lane] * cov
                 gx = (ga if valid else zero) + gw * wf * unc
@@ -415,42 +436,44 @@ def _backward_tile(
                 k1 = (omt if e1sel else zero) + (bt if e0sel else zero)
                 k2 = (omt if e2sel else zero) + (bt if e1sel else zero)
                 av[lane] += u * k0
-                av[1 * TILE_W + lane] += v * k0
-                av[2 * TILE_W + lane] += u * k1
-                av[3 * TILE_W + lane] += v * k1
-                av[4 * TILE_W + lane] += u * k2
-                av[5 * TILE_W + lane] += v * k2
-                # depth: zn = (far - 1/zq)/(far - near), zq = sum(wc iz)/sw
-                gq = gw * wf * inv_gamma * inv_fr * z * z  # dL/dzq
-                gqs = gq / sw
-                av[15 * TILE_W + lane] += gqs * wc0
-                av[16 * TILE_W + lane] += gqs * wc1
-                av[17 * TILE_W + lane] += gqs * wc2
-                zsub = zq if rsw >= wsum_min else zero
-                gw0 = gqs * (iz0 - zsub)
-                gw1 = gqs * (iz1 - zsub)
-                gw2 = gqs * (iz2 - zsub)
+                av[1 * SW + lane] += v * k0
+                av[2 * SW + lane] += u * k1
+                av[3 * SW + lane] += v * k1
+                av[4 * SW + lane] += u * k2
+                av[5 * SW + lane] += v * k2
+                # depth: zn = (far - z)/(far - near), z = sw / num, num = sum_k wc_k iz_k;
+                # dL/dnum = dL/dzn * z / ((far - near) num); num depends on iz_k and on
+                # wc_k directly and through sw = sum wc (when not clamped)
+                gnum = gw * wf * inv_gamma * inv_fr * z * rnum
+                gnum = gnum if rgb else zero
+                zsub = gnum * z if rsw >= wsum_min else zero  # the sw term: -dL/dsw
+                gw0 = gnum * iz0 - zsub
+                gw1 = gnum * iz1 - zsub
+                gw2 = gnum * iz2 - zsub
                 # the clamp passes the gradient on [0, 1] (as torch.clamp does)
                 gw0 = gw0 if (w0 >= zero) & (w0 <= one) else zero
                 gw1 = gw1 if (w1 >= zero) & (w1 <= one) else zero
                 gw2 = gw2 if (w2 >= zero) & (w2 <= one) else zero
-                av[6 * TILE_W + lane] += gw0 * px
-                av[7 * TILE_W + lane] += gw0 * py
-                av[8 * TILE_W + lane] += gw0
-                av[9 * TILE_W + lane] += gw1 * px
-                av[10 * TILE_W + lane] += gw1 * py
-                av[11 * TILE_W + lane] += gw1
-                av[12 * TILE_W + lane] += gw2 * px
-                av[13 * TILE_W + lane] += gw2 * py
-                av[14 * TILE_W + lane] += gw2
-                av[18 * TILE_W + lane] += sv[NLOC + lane] * wf
-                av[19 * TILE_W + lane] += sv[2 * NLOC + lane] * wf
-                av[20 * TILE_W + lane] += sv[3 * NLOC + lane] * wf
-        for j in range(N_GRAD):
-            tot = zero
-            for k in range(a0, a0 + n):
-                tot += acc[j * TILE_W + k]
-            grad[entry, j] = tot
+                av[6 * SW + lane] += gw0
+                av[7 * SW + lane] += gw1
+                av[8 * SW + lane] += gw2
+                av[9 * SW + lane] += gw0 * py
+                av[10 * SW + lane] += gw1 * py
+                av[11 * SW + lane] += gw2 * py
+                av[12 * SW + lane] += gnum * wc0
+                av[13 * SW + lane] += gnum * wc1
+                av[14 * SW + lane] += gnum * wc2
+                av[15 * SW + lane] += sv[NLOC + lane] * wf
+                av[16 * SW + lane] += sv[2 * NLOC + lane] * wf
+                av[17 * SW + lane] += sv[3 * NLOC + lane] * wf
+        for j in range(6):
+            grad[entry, j] = _lane_sum(av[j * SW:], n)
+        for k in range(3):  # barycentric matrix row k: (x, y, 1) coefficients
+            grad[entry, 6 + 3 * k] = _lane_dot(av[(6 + k) * SW:], pxv, n)
+            grad[entry, 7 + 3 * k] = _lane_sum(av[(9 + k) * SW:], n)
+            grad[entry, 8 + 3 * k] = _lane_sum(av[(6 + k) * SW:], n)
+        for j in range(6):
+            grad[entry, 15 + j] = _lane_sum(av[(12 + j) * SW:], n)
 
 
 @njit(parallel=True, **_OPTS)
@@ -534,8 +557,9 @@ def _make_bins(cxy: np.ndarray, cfg: _Config) -> _Bins:
     # the dynamic schedule ends with small tiles and the threads finish together
     order = np.argsort(-np.diff(tile_start), kind="stable").astype(np.int64)
     hp, wp = n_ty * TILE_H, n_tx * TILE_W
-    k = np.arange(max(hp, wp), dtype=np.float64)
-    px_tab = ((2 * k[:wp] + 1) / s - 1).astype(cxy.dtype)
+    # columns up to wp + LANES: lane groups may run past the last tile's last column
+    k = np.arange(max(hp, wp + LANES), dtype=np.float64)
+    px_tab = ((2 * k[:wp + LANES] + 1) / s - 1).astype(cxy.dtype)
     py_tab = (1 - (2 * k[:hp] + 1) / s).astype(cxy.dtype)
     return _Bins(box, n_tx, wp, order, tile_start, tile_entry, entry_face, face_start, px_tab, py_tab)
 

@@ -1,0 +1,104 @@
+"""Two reflected images with a prism cup (paper, section 4, Figures 17 and 19)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import ndimage
+from test_mirror import WavySaucer, ray_trace
+
+from saucerfab.heightfield import make_grid
+from saucerfab.mirror import split_reflected_facets, visible_region
+from saucerfab.optimize.framing import fit_frames
+from saucerfab.optimize.regions import best_placement, placement_options, region_report
+from saucerfab.scene import load_scene
+
+SAMPLES = Path(__file__).resolve().parents[1] / "samples"
+
+
+def prism_scene(n: int = 48):
+    scene = load_scene(SAMPLES / "scene_prism.toml")
+    return replace(scene, saucer=replace(scene.saucer, resolution=n))
+
+
+def test_region_split_matches_a_brute_force_ray_trace() -> None:
+    n = 48
+    scene = prism_scene(n)
+    heights = WavySaucer(scene.saucer, n).h  # the surface the ray tracer hits
+    groups = split_reflected_facets(scene, heights)
+    # a reflected frame that sees both facet regions whole
+    scene = fit_frames(scene, heights, "cover")
+    _, _, q, facet = ray_trace(scene, stride=2)
+    grid = make_grid(scene.saucer)
+    dx, dy = grid.spacing
+    j = np.clip(np.rint((q[:, 0] - grid.xs[0]) / dx).astype(int), 0, n - 1)
+    i = np.clip(np.rint((q[:, 1] - grid.ys[0]) / dy).astype(int), 0, n - 1)
+    for g in groups:
+        traced = np.zeros((n, n), bool)
+        sel = np.isin(facet, g)
+        traced[i[sel], j[sel]] = True
+        region = visible_region(scene, n, heights, facets=list(g), in_frame=False)
+        assert traced.sum() > 30 and region.sum() > 30
+        # every traced landing is in the module's region (up to one grid cell
+        # at the region's rim, where the nearest sample may fall outside)
+        grown = ndimage.binary_dilation(region, iterations=1)
+        assert (traced & ~grown).sum() == 0
+        # and the traced landings cover the region's interior
+        inner = ndimage.binary_erosion(region, iterations=2)
+        near_trace = ndimage.binary_dilation(traced, iterations=2)
+        assert (inner & ~near_trace).sum() <= 0.02 * inner.sum()
+    # the two groups' regions hardly overlap
+    rep = region_report(scene, heights)
+    assert rep.overlap < 0.05
+    assert min(rep.area_fraction) > 0.05
+
+
+def test_placement_options_and_the_choice() -> None:
+    scene = prism_scene()
+    opts = placement_options(scene)
+    assert set(opts) == {"vertex_to_viewer", "facet_to_viewer"}
+    diff = (opts["facet_to_viewer"].rotation_deg - opts["vertex_to_viewer"].rotation_deg) % 360
+    assert diff == pytest.approx(180 / 6)
+    chosen, name, reports = best_placement(scene)
+    assert name in reports
+    assert chosen.cup.rotation_deg == opts[name].rotation_deg
+    assert all(reports[name].overlap <= r.overlap + 0.01 for r in reports.values())
+
+
+def _fg(img: np.ndarray, bg: np.ndarray) -> np.ndarray:
+    return np.abs(img - bg).max(axis=-1) > 0.25
+
+
+def test_two_reflection_design_shows_three_recognisable_views(tmp_path) -> None:  # noqa: ANN001
+    from saucerfab.design import load_design
+    from saucerfab.images import prepare_image
+    from saucerfab.optimize.pipeline import run_design
+    from saucerfab.optimize.request import DesignRequest
+
+    out = tmp_path / "two"
+    req = DesignRequest(
+        SAMPLES / "direct_heart.png",
+        SAMPLES / "reflected_star.png",
+        reflected2=SAMPLES / "reflected2_moon.png",
+        scene=str(SAMPLES / "scene_prism.toml"),
+        frames="contain",
+        resolution=48,
+        image_size=96,
+        max_iters=30,
+    )
+    run_design(req, out, progress=lambda *a: None)
+    d = load_design(out)
+    assert d.scene.reflected2 is not None
+    from PIL import Image
+
+    for view, path in (("direct", req.direct), ("reflected", req.reflected), ("reflected2", req.reflected2)):
+        got = np.asarray(Image.open(out / "previews" / f"{view}_view.png").convert("RGB"), float) / 255
+        want = prepare_image(path, got.shape[0])
+        # the subject's silhouette reappears: IoU of foreground against the input's mask
+        fg = _fg(got, want.background)
+        iou = (fg & want.mask).sum() / max((fg | want.mask).sum(), 1)
+        assert iou > 0.6, f"{view}: IoU {iou:.2f}"
+    assert "prism_placement" in __import__("json").loads((out / "design.json").read_text())["metrics"]
