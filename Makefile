@@ -21,6 +21,9 @@ $(STAMP): pyproject.toml
 	$(PIP) install -q --upgrade pip
 	if [ -n "$(TORCH)" ]; then $(PIP) install -q $(TORCH); fi
 	$(PIP) install -q -e '.[dev,cluster]'
+	# compile the numba kernels once (cached beside the sources), so the first
+	# design or export does not pay for it
+	$(PY) -m saucerfab.warmup
 	touch $(STAMP)
 
 install: $(STAMP)

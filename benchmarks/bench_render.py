@@ -7,9 +7,10 @@ float32, requires grad) -> direct-view vertices and reflected-view vertices
 the heights and the colours. Timed for the numba backend and, on the same work
 in the same run, the straightforward torch backend, at sigma 1e-5 and 1e-7.
 
-The reflected view: ``saucerfab.mirror`` does not exist yet, so the saucer
-mirrored across the plane y = -0.4 (the cup's front) stands in for it: a mesh of the same size and face count, with
-flipped winding, seen through the reflected view frame.
+The reflected view is the real one: ``saucerfab.mirror.reflect`` gives the
+virtual points R = (r_x, r_y, h) of every saucer vertex in the cup (fixed xy,
+height h) and ``reflected_mesh`` the faces that reflect validly at the
+starting heights; their colours are the saucer faces' colours.
 
 Usage::
 
@@ -42,38 +43,54 @@ from saucerfab.render import Camera, soft_rasterize  # noqa: E402
 from saucerfab.render.soft_torch import count_candidate_pairs  # noqa: E402
 from saucerfab.scene import Scene  # noqa: E402
 
-MIRROR_PLANE_Y = -0.4
-
-
 def build_problem(dtype: torch.dtype = torch.float32):  # type: ignore[no-untyped-def]
-    """The paper's setup: returns (heights, make_views, faces, colors, cameras, reflected_note)."""
+    """The paper's setup.
+
+    Returns ``(heights, views, colors, note)``: the (N, N) starting heights, a
+    function ``views(h) -> [(vertices, faces, face_ids, camera), ...]`` (the
+    direct view, then one reflected part per mirror piece; ``face_ids`` index
+    the saucer faces, for their colours), the per-face colours and a note on
+    the reflected geometry.
+    """
+    from saucerfab.mirror import reflect, reflected_mesh
+
     scene = Scene()
     n = scene.saucer.resolution
     grid = make_grid(scene.saucer)
     heights0 = base_shape("waves", n)
     xy = torch.as_tensor(grid.xy(), dtype=dtype)
     faces = torch.as_tensor(triangulate(n))
-    note = f"stand-in: the saucer mirrored across y = {MIRROR_PLANE_Y} (saucerfab/mirror.py not present yet)"
+    all_ids = torch.arange(faces.shape[0])
+    pieces = reflect(scene, grid.xy())
+    parts = [
+        (torch.as_tensor(p.r_xy, dtype=dtype), torch.as_tensor(m.faces), torch.as_tensor(m.face_ids))
+        for p, m in zip(pieces, reflected_mesh(scene, heights0, pieces))
+    ]
+    cam_d, cam_r = Camera.from_scene(scene, "direct"), Camera.from_scene(scene, "reflected")
+    n_refl = sum(int(f.shape[0]) for _, f, _ in parts)
+    note = (
+        f"saucerfab.mirror.reflect in the paper's circular cup: {n_refl:,} of the "
+        f"{faces.shape[0]:,} faces reflect validly"
+    )
 
-    def views(h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        direct = torch.cat([xy, h.reshape(-1, 1)], dim=1)
-        mirrored = torch.cat(
-            [xy[:, :1], 2 * MIRROR_PLANE_Y - xy[:, 1:2], h.reshape(-1, 1)], dim=1
-        )
-        return direct, mirrored
+    def views(h: torch.Tensor) -> list[tuple[torch.Tensor, torch.Tensor, torch.Tensor, Camera]]:
+        z = h.reshape(-1, 1)
+        out = [(torch.cat([xy, z], dim=1), faces, all_ids, cam_d)]
+        out += [(torch.cat([r, z], dim=1), f, ids, cam_r) for r, f, ids in parts]
+        return out
 
     heights = torch.as_tensor(heights0, dtype=dtype)
     colors = torch.full((faces.shape[0], 3), 0.5, dtype=dtype)
-    cams = (Camera.from_scene(scene, "direct"), Camera.from_scene(scene, "reflected"))
-    return heights, views, faces, colors, cams, note
+    return heights, views, colors, note
 
 
-def iteration(heights, views, faces, colors, cams, targets, sigma, backend):  # type: ignore[no-untyped-def]
+def iteration(heights, views, colors, targets, sigma, backend):  # type: ignore[no-untyped-def]
+    """One optimizer step's rendering work; returns the gradients (heights, colours)."""
     h = heights.clone().requires_grad_(True)
     c = colors.clone().requires_grad_(True)
     loss = 0.0
-    for verts, cam, (ti, ta) in zip(views(h), cams, targets):
-        image, alpha = soft_rasterize(verts, faces, c, cam, sigma=sigma, backend=backend)
+    for (verts, faces, ids, cam), (ti, ta) in zip(views(h), targets):
+        image, alpha = soft_rasterize(verts, faces, c[ids], cam, sigma=sigma, backend=backend)
         loss = loss + ((image - ti) ** 2).sum() + ((alpha - ta) ** 2).sum()
     loss.backward()
     return h.grad, c.grad
@@ -118,27 +135,31 @@ def main() -> None:
     ap.add_argument("--write", action="store_true", help="write benchmarks/results_render.md")
     args = ap.parse_args()
 
-    heights, views, faces, colors, cams, note = build_problem()
+    heights, views, colors, note = build_problem()
     rng = np.random.default_rng(0)
     targets = [
-        (torch.as_tensor(rng.random((c.image_size, c.image_size, 3)), dtype=torch.float32),
-         torch.ones(c.image_size, c.image_size))
-        for c in cams
+        (torch.as_tensor(rng.random((cam.image_size, cam.image_size, 3)), dtype=torch.float32),
+         torch.ones(cam.image_size, cam.image_size))
+        for _, _, _, cam in views(heights)
     ]
     rows = []
     for sigma in args.sigmas:
-        pairs = sum(count_candidate_pairs(v, faces, cam, sigma) for v, cam in zip(views(heights), cams))
-        work = (heights, views, faces, colors, cams, targets, sigma)
+        pairs = sum(count_candidate_pairs(v, f, cam, sigma) for v, f, _, cam in views(heights))
+        work = (heights, views, colors, targets, sigma)
         iteration(*work, backend="numba")  # compile (or load the cache) and warm up
         _numba_ran = True
         tracemalloc.start()
         iteration(*work, backend="numba")
         numba_peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
+        c0 = time.process_time()
         tn = timed(lambda: iteration(*work, backend="numba"), args.repeat)
+        cpu_numba = (time.process_time() - c0) / args.repeat
         rss_numba = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         iteration(*work, backend="torch")
+        c0 = time.process_time()
         tt = timed(lambda: iteration(*work, backend="torch"), args.torch_repeat)
+        cpu_torch = (time.process_time() - c0) / args.torch_repeat
         rss_torch = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         # the two backends on the same work: the gradients agree
         gn = iteration(*work, backend="numba")
@@ -147,12 +168,14 @@ def main() -> None:
         rows.append(dict(
             sigma=sigma, pairs=pairs, numba_ms=1e3 * statistics.median(tn), numba_min=1e3 * min(tn),
             torch_ms=1e3 * statistics.median(tt), numba_mib=numba_peak / 2**20,
+            numba_cpu=1e3 * cpu_numba, torch_cpu=1e3 * cpu_torch,
             rss_numba=rss_numba, rss_torch=rss_torch, agree=agree,
         ))
         r = rows[-1]
         print(
-            f"sigma {sigma:g}: pairs {pairs / 1e6:.2f} M | numba {r['numba_ms']:.1f} ms (min {r['numba_min']:.1f}) "
-            f"| torch {r['torch_ms']:.0f} ms | x{r['torch_ms'] / r['numba_ms']:.0f} | numpy peak "
+            f"sigma {sigma:g}: pairs {pairs / 1e6:.2f} M | numba {r['numba_ms']:.1f} ms (min {r['numba_min']:.1f}, "
+            f"CPU {r['numba_cpu']:.0f} ms) "
+            f"| torch {r['torch_ms']:.0f} ms (CPU {r['torch_cpu']:.0f}) | x{r['torch_ms'] / r['numba_ms']:.0f} | numpy peak "
             f"{r['numba_mib']:.0f} MiB | max RSS after numba {rss_numba:.0f} MiB, after torch {rss_torch:.0f} MiB "
             f"| grad rel diff {agree:.1e}",
             flush=True,
@@ -166,25 +189,31 @@ def main() -> None:
 
 
 def report(rows: list[dict], note: str, args: argparse.Namespace) -> str:
+    load = os.getloadavg()
     lines = [
         "# Soft rasterizer benchmark (benchmarks/bench_render.py)",
         "",
-        f"Machine: {machine()}.",
+        f"Machine: {machine()}. Load average at the end of the run: "
+        f"{load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (1 / 5 / 15 min; other jobs share the cores).",
         f"Command: `.venv/bin/python benchmarks/bench_render.py --repeat {args.repeat} "
         f"--torch-repeat {args.torch_repeat}{' --write' if args.write else ''}`",
         "",
-        "One iteration: forward + backward of the direct and the reflected view (512 x 512 each), "
-        "150 x 150 'waves' saucer (44,402 faces per view), float32, gradients through to the heights "
-        f"and the face colours. Reflected view: {note}.",
+        "One iteration: forward + backward of the direct view (44,402 faces) and the reflected view "
+        "(512 x 512 each) of the 150 x 150 'waves' saucer, float32, an L2 loss on image and alpha, "
+        f"gradients through to the heights and the face colours. Reflected view: {note}.",
+        "Wall times are medians of the timed iterations; CPU is the process CPU time per iteration "
+        "(all threads), which other jobs on the machine disturb less than wall time.",
         "",
-        "| sigma | candidate pairs (both views) | numba ms/iter (median) | numba min | torch ms/iter "
-        "| speed-up | numpy peak (numba iter) | max RSS after numba / after torch | grad rel. diff |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| sigma | candidate pairs (both views) | numba ms/iter | numba min | numba CPU ms | torch ms/iter "
+        "| torch CPU ms | speed-up (wall) | numpy peak (numba iter) | max RSS after numba / torch "
+        "| grad rel. diff |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['sigma']:g} | {r['pairs'] / 1e6:.2f} M | {r['numba_ms']:.1f} | {r['numba_min']:.1f} "
-            f"| {r['torch_ms']:.0f} | {r['torch_ms'] / r['numba_ms']:.0f}x | {r['numba_mib']:.0f} MiB "
+            f"| {r['numba_cpu']:.0f} | {r['torch_ms']:.0f} | {r['torch_cpu']:.0f} "
+            f"| {r['torch_ms'] / r['numba_ms']:.0f}x | {r['numba_mib']:.0f} MiB "
             f"| {r['rss_numba']:.0f} / {r['rss_torch']:.0f} MiB | {r['agree']:.1e} |"
         )
     lines.append("")

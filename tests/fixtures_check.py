@@ -71,10 +71,12 @@ def saucer_solid(n: int = 40, size_mm: float = 100.0, base_mm: float = 3.0, amp_
 
 
 def png_bytes(w: int = 64, h: int = 64, seed: int = 0) -> bytes:
+    """An RGB PNG: gradients and a checkerboard (compresses well even when large)."""
     from PIL import Image
 
-    rng = np.random.default_rng(seed)
-    arr = rng.integers(0, 255, (h, w, 3), dtype=np.uint8)
+    yy, xx = np.indices((h, w))
+    arr = np.stack([xx * 255 // max(w - 1, 1), yy * 255 // max(h - 1, 1),
+                    ((xx // 16 + yy // 16 + seed) % 2) * 255], axis=2).astype(np.uint8)
     buf = io.BytesIO()
     Image.fromarray(arr).save(buf, format="PNG")
     return buf.getvalue()
@@ -210,7 +212,7 @@ def write_stl(path: Path, V: np.ndarray, F: np.ndarray, *, ascii: bool = False) 
     if ascii:
         lines = ["solid test"]
         for t in tri:
-            lines += ["facet normal 0 0 0", "outer loop"] + [f"vertex {x!r} {y!r} {z!r}" for x, y, z in t]
+            lines += ["facet normal 0 0 0", "outer loop"] + [f"vertex {x:.6e} {y:.6e} {z:.6e}" for x, y, z in t]
             lines += ["endloop", "endfacet"]
         lines.append("endsolid test")
         path.write_text("\n".join(lines) + "\n")

@@ -169,3 +169,48 @@ def soft_rasterize_reference(
     image = (color / softmax_sum).T.reshape(s, s, 3)
     alpha = (1.0 - keep_alpha).reshape(s, s)
     return image, alpha
+
+
+def rasterize_hard_reference(vertices, faces, camera: Camera):  # type: ignore[no-untyped-def]
+    """Brute-force hard rasterization: the ray through every pixel centre against
+    every triangle (Moeller-Trumbore, both sides), nearest hit wins, ties to the
+    lower face index.
+
+    Returns ``face_id`` (S, S), ``bary`` (S, S, 3) (barycentrics of the hit point
+    on the 3-D triangle), ``depth`` (S, S) (distance along the view axis) and
+    ``margin`` (S, S): the smallest |barycentric| over all faces the ray meets or
+    nearly meets, to leave out pixels that lie on an edge, where the answer
+    depends on rounding.
+    """
+    import numpy as np
+
+    v = np.asarray(vertices, np.float64)
+    f = np.asarray(faces, np.int64)
+    eye, dirs = camera.rays()
+    forward = camera.axes()[2]
+    s = camera.image_size
+    face_id = np.full((s, s), -1, np.int64)
+    bary = np.zeros((s, s, 3))
+    depth = np.full((s, s), np.inf)
+    margin = np.full((s, s), np.inf)
+    for k, (a, b, c) in enumerate(f):
+        e1, e2 = v[b] - v[a], v[c] - v[a]
+        pvec = np.cross(dirs, e2)
+        det = pvec @ e1
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / det
+            tvec = eye - v[a]
+            u = (pvec @ tvec) * inv
+            qvec = np.cross(tvec, e1)
+            w = (dirs * qvec).sum(-1) * inv
+            t = (qvec @ e2) * inv
+        ok = np.isfinite(inv) & (t > 0)
+        near_edge = ok & (np.minimum(np.minimum(u, w), 1 - u - w) > -1e-6)
+        margin = np.where(near_edge, np.minimum(margin, np.abs(np.minimum(np.minimum(u, w), 1 - u - w))), margin)
+        hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1)
+        z = t * (dirs @ forward)
+        better = hit & (z < depth)
+        face_id[better] = k
+        depth[better] = z[better]
+        bary[better] = np.stack([1 - u - w, u, w], -1)[better]
+    return face_id, bary, depth, margin

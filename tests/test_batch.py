@@ -30,7 +30,7 @@ from saucerfab.design import save_design, synthetic_design
 from saucerfab.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
-DESIGN_JOBS = ["a-j55", "b-bureau", "a-j850-ply", "b-hp", "a-glb"]
+DESIGN_JOBS = ["a-j55", "b-mimaki-zip", "a-j850-ply", "b-j55-60mm", "a-mimaki-wrl"]
 RAW_JOB = "raw-ring-star"
 BAD_JOB = "broken-upload"
 ALL_JOBS = [*DESIGN_JOBS, RAW_JOB, BAD_JOB]
@@ -48,9 +48,9 @@ id = "a-j55"
 design = "designs/a"
 
 [[job]]
-id = "b-bureau"
+id = "b-mimaki-zip"
 design = "designs/b"
-printer = "bureau"
+printer = "mimaki_3duj553"
 formats = ["obj"]
 export_options = { obj_zip = true }
 
@@ -61,16 +61,15 @@ printer = "j850"
 formats = ["ply", "3mf"]
 
 [[job]]
-id = "b-hp"
+id = "b-j55-60mm"
 design = "designs/b"
-printer = "hp_jf580"
 cup_diameter_mm = 60
 
 [[job]]
-id = "a-glb"
+id = "a-mimaki-wrl"
 design = "designs/a"
-printer = "bureau"
-formats = ["glb"]
+printer = "mimaki_3duj553"
+formats = ["wrl"]
 
 [[job]]
 id = "raw-ring-star"
@@ -116,10 +115,48 @@ def job_files(out: Path) -> dict[str, bytes]:
     return files
 
 
+# run_design records wall-clock times in three files of the design folder it
+# writes (design.json metrics, energy_log.jsonl, the energies-over-time plot),
+# so those differ between two runs of the same design request; the job's
+# job.json lists their sha256. Everything else must be byte-identical, and
+# these files must be identical once the times are taken out.
+TIMED = ("design/design.json", "design/energy_log.jsonl", "design/previews/energies.png")
+
+
+def _untimed(x: object) -> object:
+    if isinstance(x, dict):
+        return {
+            k: _untimed(v)
+            for k, v in x.items()
+            if not (k.endswith("_s") or k in ("seconds", "seconds_per_iteration") or k in TIMED or k in [t.removeprefix("design/") for t in TIMED])
+        }
+    if isinstance(x, list):
+        return [_untimed(v) for v in x]
+    return x
+
+
+def comparable(files: dict[str, bytes]) -> dict[str, bytes]:
+    out = {}
+    for name, data in files.items():
+        rel = name.split("/", 1)[1]
+        if rel == "design/previews/energies.png":
+            data = b"(plot over wall-clock time)"
+        elif rel == "design/energy_log.jsonl":
+            data = b"\n".join(json.dumps(_untimed(json.loads(ln))).encode() for ln in data.splitlines())
+        elif rel in ("design/design.json", MARKER):
+            data = json.dumps(_untimed(json.loads(data))).encode()
+        out[name] = data
+    return out
+
+
 def assert_same_files(a: dict[str, bytes], b: dict[str, bytes]) -> None:
     assert sorted(a) == sorted(b)
-    differ = [k for k in a if a[k] != b[k]]
-    assert not differ, f"files differ: {differ}"
+    timed = [k for k in a if k.split("/", 1)[1] in TIMED or k.endswith("/" + MARKER)]
+    exact = [k for k in a if k not in timed and a[k] != b[k]]
+    assert not exact, f"files differ: {exact}"
+    ca, cb = comparable(a), comparable(b)
+    differ = [k for k in timed if ca[k] != cb[k]]
+    assert not differ, f"files differ beyond the design's recorded times: {differ}"
 
 
 def assert_no_temporaries(out: Path) -> None:
@@ -158,10 +195,11 @@ def test_reference_outcomes(reference: tuple[Path, object]) -> None:
     assert "design" in result.outcome(RAW_JOB).times
     assert (out / RAW_JOB / "design" / "design.json").is_file()
     assert {f.split("/")[-1] for f in result.outcome("a-j850-ply").files} >= {"saucer.ply", "saucer.3mf"}
-    assert any(f.endswith(".zip") for f in result.outcome("b-bureau").files)
+    assert any(f.endswith(".zip") for f in result.outcome("b-mimaki-zip").files)
+    assert "check/saucer.zip/saucer.obj.json" in result.outcome("b-mimaki-zip").files
     bad = result.outcome(BAD_JOB)
     assert bad.status == "failed" and bad.stage == "design"
-    assert "truncated" in bad.reason
+    assert "'images/broken.png'" in bad.reason and "truncated" in bad.reason  # the user's path, not a scratch copy
     assert read_marker(out / BAD_JOB)["complete"] is False
     assert sorted(p.name for p in (out / BAD_JOB).iterdir()) == [MARKER]
     report = json.loads((out / JSON_NAME).read_text())
@@ -186,22 +224,24 @@ def test_rerun_skips_unchanged_and_runs_changed(batch: Path, reference: tuple[Pa
     assert not again.outcome(BAD_JOB).reused and again.outcome(BAD_JOB).status == "failed"
     assert json.loads((out / JSON_NAME).read_text())["summary"]["reused"] == 6
 
-    # change one input of design b (a byte of its texture's metadata-free copy): its jobs run again
+    # change design b (another seed): the two jobs made from it run again
     folder = tmp_path / "copy"
     shutil.copytree(batch.parent, folder)
     design_b = folder / "designs" / "b"
     save_design(synthetic_design(shape="ripples", seed=5, resolution=12, texture_size=32), design_b)
     changed = run_batch(folder / "manifest.toml", out, workers=0)
     rerun = {j for j in ALL_JOBS if not changed.outcome(j).reused}
-    assert rerun == {"b-bureau", "b-hp", BAD_JOB}
-    assert changed.outcome("b-hp").status == "ok"
+    assert rerun == {"b-mimaki-zip", "b-j55-60mm", BAD_JOB}
+    assert changed.outcome("b-j55-60mm").status == "ok"
     # a changed parameter (printer) changes the key, too
     m = load_manifest(folder / "manifest.toml")
     plan = {p.job.id: p for p in plan_batch(m, out)}
-    assert plan["a-j55"].action == "reuse" and plan["b-hp"].action == "reuse"
-    (folder / "manifest.toml").write_text(MANIFEST.replace('id = "b-hp"\ndesign = "designs/b"\nprinter = "hp_jf580"', 'id = "b-hp"\ndesign = "designs/b"\nprinter = "j55"'))
+    assert plan["a-j55"].action == "reuse" and plan["b-j55-60mm"].action == "reuse"
+    text = MANIFEST.replace('id = "b-j55-60mm"\ndesign = "designs/b"\n', 'id = "b-j55-60mm"\ndesign = "designs/b"\nprinter = "j850"\n')
+    assert text != MANIFEST
+    (folder / "manifest.toml").write_text(text)
     plan = {p.job.id: p for p in plan_batch(load_manifest(folder / "manifest.toml"), out)}
-    assert plan["b-hp"].action == "run" and plan["a-j55"].action == "reuse"
+    assert plan["b-j55-60mm"].action == "run" and plan["a-j55"].action == "reuse"
     # damaged output (a file edited after the run) is not complete any more
     target = next((out / "a-j55" / "export").glob("*.3mf"))
     target.write_bytes(target.read_bytes()[:-1])
@@ -210,53 +250,89 @@ def test_rerun_skips_unchanged_and_runs_changed(batch: Path, reference: tuple[Pa
 
 
 def test_run_job_is_deterministic(batch: Path, reference: tuple[Path, object], tmp_path: Path) -> None:
-    """The same job twice (design included) gives byte-identical files."""
+    """The same job again (design included), in a fresh output folder: byte-identical
+    files. (The pool, cluster and resume tests compare whole batches the same way.)"""
     m = load_manifest(batch)
+    out = tmp_path / "out"
     for job_id in (RAW_JOB, "a-j850-ply"):
-        outs = []
-        for k in range(2):
-            out = tmp_path / f"o{k}"
-            result, reused = run_job(m.job(job_id), m.root, out, force=True)
-            assert result.status == "ok" and not reused
-            outs.append({k2: v for k2, v in job_files(out).items() if k2.startswith(job_id + "/")})
-        assert_same_files(outs[0], outs[1])
+        result, reused = run_job(m.job(job_id), m.root, out, force=True)
+        assert result.status == "ok" and not reused
+        again = {k: v for k, v in job_files(out).items() if k.startswith(job_id + "/")}
         ref = {k: v for k, v in job_files(reference[0]).items() if k.startswith(job_id + "/")}
-        assert_same_files(outs[0], ref)
-    result, reused = run_job(m.job(RAW_JOB), m.root, tmp_path / "o0")
+        assert_same_files(again, ref)
+    result, reused = run_job(m.job(RAW_JOB), m.root, out)
     assert reused and result.status == "ok"
 
 
+class Recorder(LineDisplay):
+    """A line display that also keeps the stage events workers report."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+        self.stages: list[tuple[str, str]] = []
+        super().__init__(self)
+
+    def write(self, s: str) -> None:
+        self.lines.append(s)
+
+    def flush(self) -> None:
+        pass
+
+    def stage(self, job_id: str, stage: str) -> None:
+        self.stages.append((job_id, stage.split()[0]))
+
+
 def test_local_pool_same_outputs(batch: Path, reference: tuple[Path, object], tmp_path: Path) -> None:
-    lines: list[str] = []
-
-    class Capture:
-        def write(self, s: str) -> None:
-            lines.append(s)
-
-        def flush(self) -> None:
-            pass
-
     out = tmp_path / "out"
-    result = run_batch(batch, out, workers=2, display=LineDisplay(Capture()))
+    rec = Recorder()
+    result = run_batch(batch, out, workers=2, display=rec)
     assert result.exit_code == 1
     assert result.engine == "local process pool, 2 workers"
     assert_same_files(job_files(out), job_files(reference[0]))
     workers = {result.outcome(j).worker.split(":")[1] for j in ALL_JOBS}
     assert str(os.getpid()) not in workers  # ran in the pool's processes
-    text = "".join(lines)
+    text = "".join(rec.lines)
     assert "7 jobs" in text and "broken-upload: failed" in text and "a-j55: ok" in text
+    # per-job status: workers report each stage as it starts
+    assert {s for j, s in rec.stages if j == RAW_JOB} == {"design", "export", "check"}
+    assert {s for j, s in rec.stages if j == "a-j55"} == {"export", "check"}
     assert_no_temporaries(out)
+
+
+def test_rich_display(batch: Path, tmp_path: Path) -> None:
+    import io
+
+    from rich.console import Console
+
+    from saucerfab.batch.report import RichDisplay, print_table
+
+    csv = batch.parent / "rich.csv"
+    csv.write_text(
+        "id,design,printer,cup_diameter_mm,export_options\n"
+        "a-j55,designs/a,j55,80,texture_px=64\n"
+        "gone,designs/none,j55,80,\n"
+    )
+    buf = io.StringIO()
+    console = Console(file=buf, force_terminal=True, color_system=None, width=200)
+    result = run_batch(csv, tmp_path / "out", workers=0, display=RichDisplay(console))
+    print_table(result.outcomes, console)
+    text = buf.getvalue()
+    assert "a-j55: ok check printable" in text  # a line per finished job
+    assert "gone: failed (inputs: design folder 'designs/none' does not exist" in text
+    assert "2/2" in text  # the overall progress bar
+    assert "2 jobs: 1 ok, 1 failed" in text  # the final table's summary
 
 
 def test_local_dask_cluster_same_outputs(batch: Path, reference: tuple[Path, object], tmp_path: Path) -> None:
     from distributed import LocalCluster
 
     out = tmp_path / "out"
+    rec = Recorder()
     with LocalCluster(
         n_workers=1, threads_per_worker=2, processes=True, host="127.0.0.1", dashboard_address=None
     ) as cluster:
         assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
-        result = run_batch(batch, out, scheduler=cluster.scheduler_address)
+        result = run_batch(batch, out, scheduler=cluster.scheduler_address, display=rec)
         worker_pids = set(cluster.scheduler_info["workers"].keys())
     assert worker_pids
     assert result.exit_code == 1
@@ -265,6 +341,7 @@ def test_local_dask_cluster_same_outputs(batch: Path, reference: tuple[Path, obj
     assert all(result.outcome(j).status == "ok" for j in [*DESIGN_JOBS, RAW_JOB])
     assert str(os.getpid()) not in {result.outcome(j).worker.split(":")[1] for j in ALL_JOBS}
     assert_same_files(job_files(out), job_files(reference[0]))
+    assert (RAW_JOB, "design") in rec.stages  # stage events travel as Dask worker events
     # rerun through the cluster: everything complete is reused, no task needed for those
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
         again = run_batch(batch, out, scheduler=cluster.scheduler_address)
@@ -339,10 +416,44 @@ def test_kill_driver_and_workers_then_resume(batch: Path, reference: tuple[Path,
     assert_no_temporaries(out)
 
 
+def test_interrupt_keeps_finished_jobs(batch: Path, reference: tuple[Path, object], tmp_path: Path) -> None:
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it): exit 130,
+    the report says interrupted, finished jobs are kept and reused."""
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "saucerfab", "batch", str(batch), "--out", str(out), "--workers", "2"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while not any((out / j / MARKER).is_file() for j in ALL_JOBS):
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.01)
+        os.killpg(proc.pid, signal.SIGINT)
+        assert proc.wait(timeout=30) == 130
+        err = proc.stderr.read().decode() if proc.stderr else ""
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert "run the same command again" in err, err
+    report = json.loads((out / JSON_NAME).read_text())
+    assert report["state"] == "interrupted"
+    assert_no_temporaries(out)
+    finished = {j for j in ALL_JOBS if (m := read_marker(out / j)) and m["complete"]}
+    resumed = run_batch(batch, out, workers=0)
+    assert {j for j in ALL_JOBS if resumed.outcome(j).reused} == finished
+    assert_same_files(job_files(out), job_files(reference[0]))
+
+
 def test_pool_worker_killed_mid_job_is_retried(batch: Path, reference: tuple[Path, object], tmp_path: Path) -> None:
     out = tmp_path / "out"
     box: dict[str, object] = {}
-    t = threading.Thread(target=lambda: box.update(result=run_batch(batch, out, workers=1, force=True)))
+    quick = batch.parent / "design-jobs.toml"  # the design-folder jobs only
+    quick.write_text(MANIFEST.split('[[job]]\nid = "raw-ring-star"')[0])
+    assert len(load_manifest(quick).jobs) == len(DESIGN_JOBS)
+    t = threading.Thread(target=lambda: box.update(result=run_batch(quick, out, workers=1)))
     me = psutil.Process()
     t.start()
     killed = None
@@ -360,8 +471,10 @@ def test_pool_worker_killed_mid_job_is_retried(batch: Path, reference: tuple[Pat
     t.join(180)
     assert killed is not None, "no pool worker to kill"
     result = box["result"]
-    assert all(result.outcome(j).status == "ok" for j in [*DESIGN_JOBS, RAW_JOB])  # type: ignore[attr-defined]
-    assert_same_files(job_files(out), job_files(reference[0]))
+    assert all(result.outcome(j).status == "ok" for j in DESIGN_JOBS)  # type: ignore[attr-defined]
+    assert max(result.outcome(j).attempts for j in DESIGN_JOBS) == 2  # type: ignore[attr-defined]
+    ref = {k: v for k, v in job_files(reference[0]).items() if k.split("/")[0] in DESIGN_JOBS}
+    assert_same_files(job_files(out), ref)
 
 
 def test_cli(batch: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -371,7 +484,7 @@ def test_cli(batch: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     csv.write_text(
         "id,design,printer,cup_diameter_mm,formats,export_options\n"
         "a-j55,designs/a,j55,80,3mf,texture_px=64\n"
-        "b-bureau,designs/b,bureau,80,obj,texture_px=64; obj_zip=true\n"
+        "b-mimaki,designs/b,mimaki_3duj553,80,obj,texture_px=64; obj_zip=true\n"
     )
     assert main(["batch", str(csv), "--out", str(out), "--workers", "0", "--quiet"]) == 0
     capsys.readouterr()
@@ -439,3 +552,50 @@ def test_one_batch_per_output_folder_and_stale_temporaries(batch: Path, tmp_path
     assert run_batch(csv, out, workers=0).exit_code == 0
     assert_no_temporaries(out)
     assert (out / "keep.txt").read_text() == "not ours"
+
+
+def test_unprintable_result_is_a_failed_job(tmp_path: Path) -> None:
+    """A printer (a profile file beside the manifest) whose minimum wall the part
+    cannot meet: the job fails with the reason, the other job is fine."""
+    folder = tmp_path / "b"
+    manifest = make_batch(
+        folder,
+        """
+[defaults]
+cup_diameter_mm = 80
+export_options = { texture_px = 64 }
+
+[[job]]
+id = "thin"
+design = "designs/a"
+printer = "printers/fussy.toml"
+
+[[job]]
+id = "fine"
+design = "designs/a"
+printer = "j55"
+""",
+    )
+    (folder / "printers").mkdir()
+    profile = (ROOT / "printers" / "j55.toml").read_text()
+    profile = profile.replace("min_wall_mm = 1.0", "min_wall_mm = 8.0").replace('thin_policy = "warn"', 'thin_policy = "refuse"')
+    assert "min_wall_mm = 8.0" in profile and 'thin_policy = "refuse"' in profile
+    (folder / "printers" / "fussy.toml").write_text(profile)
+    out = tmp_path / "out"
+    result = run_batch(manifest, out, workers=0)
+    assert result.outcome("fine").status == "ok"
+    thin = result.outcome("thin")
+    assert thin.status == "failed" and thin.stage in ("export", "check")
+    assert "thin" in thin.reason.lower(), thin.reason
+    assert result.exit_code == 1
+    marker = read_marker(out / "thin")
+    if thin.stage == "check":  # complete outputs, kept for inspection, not run again
+        assert marker["complete"] and thin.verdict == "not printable"
+        assert run_batch(manifest, out, workers=0).outcome("thin").reused
+    else:
+        assert not marker["complete"]
+    # the profile is part of the job key: loosening it makes the job run again, and pass
+    (folder / "printers" / "fussy.toml").write_text(profile.replace("min_wall_mm = 8.0", "min_wall_mm = 1.0"))
+    again = run_batch(manifest, out, workers=0)
+    assert not again.outcome("thin").reused and again.outcome("thin").status == "ok"
+    assert again.outcome("fine").reused

@@ -214,13 +214,13 @@ def test_csv_manifest(tmp_path: Path) -> None:
         "# a comment line\n"
         "id,design,direct,reflected,printer,cup_diameter_mm,formats,design_options,export_options\n"
         "one,d,,,j55,80,3mf;obj,,texture_px=256; obj_zip=true\n"
-        "two,,img/a.png,img/b.png,bureau,75.5,obj glb,resolution=16; fast=false; ablation=\"full\",\n"
+        "two,,img/a.png,img/b.png,bureau,75.5,obj glb,resolution=16; height_scale=0.5; ablation=\"full\",\n"
     )
     m = load_manifest(_write(tmp_path, "m.csv", text))
     one, two = m.jobs
     assert one.formats == ("3mf", "obj") and one.export_options == {"texture_px": 256, "obj_zip": True}
     assert two.cup_diameter_mm == 75.5 and two.formats == ("obj", "glb")
-    assert two.design_options == {"resolution": 16, "fast": False, "ablation": "full"}
+    assert two.design_options == {"resolution": 16, "height_scale": 0.5, "ablation": "full"}
     with pytest.raises(ConfigError, match="unknown column"):
         load_manifest(_write(tmp_path, "bad.csv", "id,design,colour\na,d,red\n"))
 

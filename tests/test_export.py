@@ -399,18 +399,21 @@ def test_prusaslicer_loads_and_slices_3mf_and_obj(exported: ExportResult, tmp_pa
     exe = shutil.which("prusa-slicer")
     assert exe, "prusa-slicer missing: run bash .ci/install-tools"
     env = {**os.environ, "HOME": str(tmp_path)}
-    for name in ("saucer.3mf", "saucer.obj"):
-        src = exported.out / name
-        info = subprocess.run(
-            [exe, "--datadir", str(tmp_path / "cfg"), "--loglevel", "1", "--info", str(src)],
-            capture_output=True, text=True, timeout=120, env=env,
-        )
-        assert info.returncode == 0, info.stderr
-        assert "manifold = yes" in info.stdout, info.stdout
-        assert f"number_of_facets = {exported.triangles}" in info.stdout
-        size_x = float(next(ln for ln in info.stdout.splitlines() if ln.startswith("size_x")).split("=")[1])
+    files = [exported.out / "saucer.3mf", exported.out / "saucer.obj"]
+    info = subprocess.run(
+        [exe, "--datadir", str(tmp_path / "cfg"), "--loglevel", "1", "--info", *map(str, files)],
+        capture_output=True, text=True, timeout=120, env=env,
+    )
+    assert info.returncode == 0, info.stderr
+    blocks = info.stdout.split("[saucer.")[1:]
+    assert len(blocks) == 2, info.stdout
+    for block in blocks:
+        assert "manifold = yes" in block, block
+        assert f"number_of_facets = {exported.triangles}" in block
+        size_x = float(next(ln for ln in block.splitlines() if ln.startswith("size_x")).split("=")[1])
         assert size_x == pytest.approx(exported.bbox_mm[0], abs=1e-3)
-        gcode = tmp_path / f"{name}.gcode"
+    for src in files:
+        gcode = tmp_path / f"{src.name}.gcode"
         sl = subprocess.run(
             [exe, "--datadir", str(tmp_path / "cfg"), "--loglevel", "1", "--export-gcode",
              "--layer-height", "0.3", "--output", str(gcode), str(src)],
@@ -418,8 +421,8 @@ def test_prusaslicer_loads_and_slices_3mf_and_obj(exported: ExportResult, tmp_pa
         )
         assert sl.returncode == 0, sl.stdout + sl.stderr
         assert "error" not in (sl.stdout + sl.stderr).lower().replace("[trace]", "")
-        head = gcode.read_text(errors="replace")
-        assert head.count(";LAYER_CHANGE") >= int(exported.bbox_mm[2] / 0.3) - 2
+        text = gcode.read_text(errors="replace")
+        assert text.count(";LAYER_CHANGE") >= int(exported.bbox_mm[2] / 0.3) - 2  # every layer of the part
 
 
 def test_cup_seat_is_where_the_cup_stands(exported: ExportResult, scene_json: dict) -> None:
@@ -511,6 +514,9 @@ def test_preferred_format_and_printer_texture_size(design: Design, tmp_path: Pat
     assert res.formats == ["3mf"] and list(res.files) == ["3mf"]
     want = load_profile("j55").texture_px_for(37.5 / (7 / 8))
     assert res.texture_px == want
+    res = export_design(design, tmp_path / "q", printer="j55", cup_diameter_mm=CUP_MM, formats="stl, 3MF",
+                        options=FabOptions(texture_px=ATLAS))
+    assert res.formats == ["stl", "3mf"]
 
 
 # --------------------------------------------------------------------------- bad input
@@ -623,3 +629,18 @@ def test_cli_export_prints_summary_and_checks(design: Design, tmp_path: Path, ca
     assert code == 2 and not (tmp_path / "y").exists()
     code = main(["export", str(folder), "--cup-diameter-mm", "-1", "--out", str(tmp_path / "y")])
     assert code == 2 and not (tmp_path / "y").exists()
+
+
+def test_cli_export_json(design: Design, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = save_design(design, tmp_path / "design")
+    code = main(["export", str(folder), "--printer", "bureau", "--cup-diameter-mm", str(CUP_MM), "--formats", "obj",
+                 "--zip-obj", "--seat", "ring", "--texture-px", str(ATLAS), "--out", str(tmp_path / "o"), "--json", "-q"])
+    captured = capsys.readouterr()
+    assert captured.err == ""  # -q: no progress
+    d = json.loads(captured.out)
+    assert d["formats"] == ["obj"] and [Path(p).name for p in d["files"]["obj"]] == ["saucer.zip"]
+    # the zip is checked as what the bureau unpacks; the exit code is the worst check's
+    assert len(d["checks"]) == 1 and d["checks"][0]["path"].endswith("saucer.zip")
+    assert d["checks"][0]["verdict"] in ("printable", "not printable")  # read, not "unreadable"
+    assert code == d["exit_code"] == d["checks"][0]["exit_code"]
+    assert json.loads((tmp_path / "o" / "scene.json").read_text())["seat"]["kind"] == "ring"

@@ -68,14 +68,14 @@ def test_steep_rows_get_more_texels() -> None:
     n = 13
     xs = np.linspace(0, 120, n)
     ys = np.linspace(0, 120, n)
-    h = np.tile(np.where(np.arange(n) % 3 == 2, 0.0, np.arange(n) % 3 * 3.0)[:, None], (1, n))
+    h = np.tile((np.arange(n) % 3 * 10.0)[:, None], (1, n))  # rise 10, rise 10, drop 20 per 10 mm
     dx, dy = surface_density(h, xs, ys)
     assert np.allclose(dx, 1.0)
     lay = layout_page(1024, 8, xs, ys, h)
     rows = -np.diff(lay.row_px)
     assert np.allclose(rows / rows.sum(), dy / dy.sum())
     assert rows.max() / rows.min() == pytest.approx(dy.max() / dy.min())
-    assert dy.max() > 1.5  # the drop of 6 over a 10 mm cell
+    assert dy.max() == pytest.approx(np.sqrt(5.0)) and dy.min() == pytest.approx(np.sqrt(2.0))
 
 
 def test_top_uv_of_grid_vertices_hits_the_breakpoints() -> None:
@@ -128,7 +128,7 @@ def test_locate_inverts_the_breakpoints() -> None:
     i, fy = locate_rows(lay)
     py = lay.top.y + np.arange(lay.top.h) + 0.5
     assert np.allclose(lay.row_px[i] + fy * (lay.row_px[i + 1] - lay.row_px[i]), py)
-    assert ((fx >= 0) & (fx <= 1) & (fy >= 0) & (fy <= 1)).all()
+    assert ((fx >= 0) & (fx <= 1)).all() and ((fy >= 0) & (fy <= 1)).all()
 
 
 def test_bake_kernel_matches_the_slow_reference() -> None:
@@ -178,16 +178,31 @@ def blob_mask(size: int, frac: float, seed: int) -> np.ndarray:
 
 @pytest.mark.parametrize("size, frac", [(97, 0.3), (200, 0.5)])
 def test_harmonic_fill_matches_the_direct_solve(size: int, frac: float) -> None:
+    from scipy import ndimage
+
     rng = np.random.default_rng(size)
-    vals = rng.uniform(0, 255, (size, size, 3)).astype(np.float32)
+    # an image-like texture: smooth areas with texel-scale detail on top
+    vals = ndimage.gaussian_filter(rng.uniform(0, 255, (size, size, 3)), (3, 3, 0)).astype(np.float32)
     known = blob_mask(size, frac, size)
+    known[size // 2, :] = True  # a thin known line across the unknown blobs
     fast = harmonic_fill(vals, known)
     ref = harmonic_fill_reference(vals, known)
     np.testing.assert_array_equal(fast[known], vals[known])  # known texels untouched
     err = np.abs(fast - ref)[~known]
-    assert err.max() < 2.5 and err.mean() < 0.5, (err.max(), err.mean())  # of 255
+    assert err.max() < 1.0 and err.mean() < 0.2, (err.max(), err.mean())  # of 255
     # maximum principle
     assert fast.min() >= vals[known].min() - 1e-3 and fast.max() <= vals[known].max() + 1e-3
+
+
+def test_harmonic_fill_converges_on_white_noise() -> None:
+    """The hardest boundary data: every texel independent. More cycles, less error."""
+    rng = np.random.default_rng(7)
+    vals = rng.uniform(0, 255, (160, 160, 3)).astype(np.float32)
+    known = blob_mask(160, 0.5, 7)
+    ref = harmonic_fill_reference(vals, known)
+    errs = [float(np.abs(harmonic_fill(vals, known, cycles=c) - ref)[~known].mean()) for c in (0, 2, 6)]
+    assert errs[0] > errs[1] > errs[2]
+    assert errs[1] < 2.5 and errs[2] < 0.5, errs
 
 
 def test_harmonic_fill_edge_cases() -> None:
@@ -254,3 +269,12 @@ def test_png_bytes_round_trip_and_are_reproducible() -> None:
     assert a == b
     back = np.asarray(Image.open(io.BytesIO(a)))
     np.testing.assert_array_equal(back, img)
+
+
+def test_warm_up_compiles_every_kernel() -> None:
+    from saucerfab.fabricate import kernels
+
+    names = kernels.warm_up()
+    jitted = [n for n in dir(kernels) if hasattr(getattr(kernels, n), "signatures")]
+    assert sorted(names) == sorted(jitted)
+    assert all(getattr(kernels, n).signatures for n in names)

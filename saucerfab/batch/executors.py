@@ -238,6 +238,7 @@ class DaskEngine:
         self._slots_at = 0.0
         self._slots = 2
         self._scattered: dict[Any, Any] = {}
+        self._finished: queue.SimpleQueue[Any] = queue.SimpleQueue()
 
     def _on_event(self, event: Any) -> None:
         try:
@@ -265,15 +266,17 @@ class DaskEngine:
         data = self.client.scatter(payload, hash=False)
         fut = self.client.submit(run, data, key=f"saucerfab-job-{payload.job_id}-{uuid.uuid4().hex[:8]}", pure=False)
         self._scattered[fut.key] = data
+        fut.add_done_callback(self._finished.put)
         return fut
 
     def wait(self, handles: list[Any], timeout: float) -> list[tuple[Any, Any]]:
-        from distributed import wait
-
+        done = []
         try:
-            done, _ = wait(handles, timeout=timeout, return_when="FIRST_COMPLETED")
-        except TimeoutError:
-            return []
+            done.append(self._finished.get(timeout=timeout))
+            while True:
+                done.append(self._finished.get_nowait())
+        except queue.Empty:
+            pass
         out: list[tuple[Any, Any]] = []
         for fut in done:
             self._scattered.pop(fut.key, None)
@@ -300,12 +303,13 @@ class DaskEngine:
                 return ev
 
     def close(self, cancel: bool = False) -> None:
+        # Closing the client releases its futures: the scheduler drops the
+        # tasks nobody wants any more (``cancel`` needs nothing else).
         try:
-            if cancel:
-                self.client.cancel(list(self._scattered.values()), force=True)
             self.client.unsubscribe_topic(self.topic)
         except Exception:  # noqa: BLE001 - closing must not hide the batch's own outcome
             pass
+        self._scattered.clear()
         self.client.close()
 
 

@@ -38,7 +38,7 @@ from typing import Any
 
 from saucerfab import __version__
 from saucerfab.batch.manifest import JobSpec
-from saucerfab.errors import InputFileError, SaucerfabError
+from saucerfab.errors import InputFileError, Interrupted, SaucerfabError
 from saucerfab.fileio import atomic_dir
 
 MARKER = "job.json"
@@ -62,7 +62,9 @@ class Payload:
     """Everything a worker needs to run one job; travels to the worker by pickle.
 
     ``files`` maps a path relative to the job's input folder (``design/heights.npy``,
-    ``direct.png``, ``shape.npy``, ``scene.toml``) to its bytes.
+    ``direct.png``, ``shape.npy``, ``scene.toml``) to its bytes; ``sources``
+    maps those names (and ``design``) to the paths the manifest gave, so that
+    messages name the user's files, not the worker's scratch copies.
     """
 
     job_id: str
@@ -77,6 +79,7 @@ class Payload:
     scratch_root: str | None = None
     threads: int = 1
     event_topic: str | None = None
+    sources: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -219,7 +222,6 @@ def load_payload(
     job: JobSpec,
     root: Path,
     *,
-    design_overrides: dict[str, Any] | None = None,
     scratch_root: str | os.PathLike[str] | None = None,
     threads: int = 1,
     event_topic: str | None = None,
@@ -229,16 +231,22 @@ def load_payload(
     Raises:
         SaucerfabError: an input is missing or unreadable, or the printer is unknown.
     """
-    from dataclasses import replace
-
     from saucerfab.fabricate.profiles import load_profile
 
-    if design_overrides and job.kind == "raw":
-        job = replace(job, design_options={**job.design_options, **design_overrides})
-    profile = load_profile(job.printer)
-    files = read_inputs(job, root)
+    try:
+        profile = load_profile(job.printer)
+        files = read_inputs(job, root)
+    except SaucerfabError as exc:  # name files as the manifest does, relative to its folder
+        exc.args = (str(exc).replace(str(root.resolve()) + os.sep, ""),)
+        raise
     key = job_key(job, files, profile)
     request: dict[str, Any] = {}
+    if job.design is not None:
+        sources = {"design": _shown(job.design, root)}
+    else:
+        sources = {}
+        for role, path in job.files.items():
+            sources[next(rel for rel in files if rel.split(".", 1)[0] == role)] = _shown(path, root)
     if job.kind == "raw":
         by_role = {rel.split(".", 1)[0]: rel for rel in files}
         request = dict(job.design_options)
@@ -262,7 +270,15 @@ def load_payload(
         scratch_root=os.fspath(scratch_root) if scratch_root is not None else None,
         threads=threads,
         event_topic=event_topic,
+        sources=sources,
     )
+
+
+def _shown(path: Path, root: Path) -> str:
+    try:
+        return path.relative_to(root.resolve()).as_posix()
+    except ValueError:
+        return str(path)
 
 
 # --------------------------------------------------------------------------- worker side
@@ -332,8 +348,9 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
             if role in kw:
                 kw[role] = inp / kw[role]
         for role in ("shape", "scene"):
-            if kw.get(role) and "." in kw[role] and (inp / kw[role]).is_file():
+            if kw.get(role) in payload.files:  # a file the job carries, not a built-in name
                 kw[role] = str(inp / kw[role])
+
         def progress(name: str, it: int, max_it: int, parts: dict[str, float], elapsed: float) -> None:
             _emit(payload, f"design {name} {it}/{max_it}")
 
@@ -370,13 +387,8 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
     checks: dict[str, Any] = {}
     reasons: list[str] = []
     for fmt in payload.formats:
-        suffix = MESH_SUFFIX.get(fmt, f".{fmt}")
-        meshes = [Path(p) for p in result.files.get(fmt, []) if Path(p).suffix.lower() == suffix]
-        if not meshes:
-            raise SaucerfabError(f"the export wrote no {suffix} file for format {fmt!r}")
-        for mesh in meshes:
+        for rel, mesh in _meshes_to_check(fmt, [Path(p) for p in result.files.get(fmt, [])], export_dir, work):
             report = check_mesh(mesh, printer=payload.printer)
-            rel = "export/" + mesh.resolve().relative_to(export_dir.resolve()).as_posix()
             d = report.to_dict()
             d["path"] = rel  # the path inside the job's folder, not the worker's scratch
             d.pop("elapsed_s", None)  # times go to the batch report; job files stay byte-identical
@@ -406,6 +418,36 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
     )
 
 
+def _meshes_to_check(fmt: str, paths: list[Path], export_dir: Path, work: Path) -> list[tuple[str, Path]]:
+    """(name inside the job folder, file to check) for each mesh file the export wrote.
+
+    An OBJ written as one zip (``obj_zip``) is unpacked into the scratch
+    folder and its ``.obj`` checked; it is named ``export/<zip>/<obj>``.
+    """
+    import zipfile
+
+    suffix = MESH_SUFFIX.get(fmt, f".{fmt}")
+    found: list[tuple[str, Path]] = []
+    for p in paths:
+        rel = "export/" + p.resolve().relative_to(export_dir.resolve()).as_posix()
+        if p.suffix.lower() == suffix:
+            found.append((rel, p))
+        elif p.suffix.lower() == ".zip":
+            dest = work / "unzipped" / p.name
+            with zipfile.ZipFile(p) as zf:
+                for info in zf.infolist():
+                    name = info.filename
+                    if info.is_dir() or "/" in name or "\\" in name or name.startswith(".") or not name:
+                        raise SaucerfabError(f"the export's {p.name} holds an unexpected entry {name!r}")
+                    dest.mkdir(parents=True, exist_ok=True)
+                    (dest / name).write_bytes(zf.read(info))
+                    if name.lower().endswith(suffix):
+                        found.append((f"{rel}/{name}", dest / name))
+    if not found:
+        raise SaucerfabError(f"the export wrote no {suffix} file for format {fmt!r}")
+    return found
+
+
 def _finding_counts(report: Any) -> dict[str, int]:
     counts: dict[str, int] = {}
     for f in getattr(report, "findings", []) or []:
@@ -415,11 +457,21 @@ def _finding_counts(report: Any) -> dict[str, int]:
     return dict(sorted(counts.items()))
 
 
+def _user_paths(text: str, payload: Payload, work: Path) -> str:
+    """``text`` with the worker's scratch paths replaced by the manifest's paths."""
+    pairs = [(str(work / "in" / rel), shown) for rel, shown in payload.sources.items()]
+    pairs += [(str(work / "out"), "<output>"), (str(work / "in"), "<inputs>"), (str(work), "<scratch>")]
+    for scratch, shown in sorted(pairs, key=lambda p: -len(p[0])):
+        text = text.replace(scratch, shown)
+    return text
+
+
 def execute(payload: Payload) -> JobResult:
     """Run one job's stages in a scratch folder; return its outcome and output bytes.
 
     Never raises for a failing job (the failure is the result); only
-    ``KeyboardInterrupt`` / ``SystemExit`` pass through.
+    ``KeyboardInterrupt``, :class:`~saucerfab.errors.Interrupted` and
+    ``SystemExit`` pass through.
     """
     t0 = time.perf_counter()
     times: dict[str, float] = {}
@@ -431,6 +483,8 @@ def execute(payload: Payload) -> JobResult:
     work = Path(tempfile.mkdtemp(prefix=f"{payload.job_id}.", dir=root))
     try:
         res = _run_stages(payload, work, times, stage)
+    except Interrupted:
+        raise  # Ctrl-C inside a stage (the design turns it into Interrupted) stops the batch
     except SaucerfabError as exc:
         res = JobResult(payload.job_id, payload.key, "failed", stage=stage[0], reason=str(exc))
     except MemoryError:
@@ -446,6 +500,8 @@ def execute(payload: Payload) -> JobResult:
         )
     finally:
         shutil.rmtree(work, ignore_errors=True)
+    if res.reason:
+        res.reason = _user_paths(res.reason, payload, work)
     times["total"] = time.perf_counter() - t0
     res.times = {k: round(v, 4) for k, v in times.items()}
     res.worker = f"{socket.gethostname()}:{os.getpid()}"
@@ -493,7 +549,20 @@ def commit(result: JobResult, out_root: Path) -> Path:
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
+        os.chmod(tmp, 0o777 & ~umask())  # the temporary folder is private (0700); the result is not
     return dest
+
+
+_UMASK: int | None = None
+
+
+def umask() -> int:
+    """This process's umask (read once)."""
+    global _UMASK
+    if _UMASK is None:
+        _UMASK = os.umask(0o022)
+        os.umask(_UMASK)
+    return _UMASK
 
 
 def read_marker(folder: Path) -> dict[str, Any] | None:
@@ -552,7 +621,6 @@ def run_job(
     out_root: Path,
     *,
     force: bool = False,
-    design_overrides: dict[str, Any] | None = None,
 ) -> tuple[JobResult, bool]:
     """Run one job in this process end to end: inputs, design, export, check, commit.
 
@@ -560,7 +628,7 @@ def run_job(
     on disk for the same key and nothing ran.
     """
     try:
-        payload = load_payload(job, root, design_overrides=design_overrides)
+        payload = load_payload(job, root)
     except SaucerfabError as exc:
         return failed_result(job, "inputs", str(exc)), False
     if not force:

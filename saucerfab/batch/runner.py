@@ -210,6 +210,7 @@ def run_batch(
             engine.close(cancel=True)
             display.close()
             report(final=True)
+            clean_stale(out)  # the stopped workers' scratch folders
             done = sum(o.status != "pending" for o in ordered)
             raise Interrupted(
                 f"batch interrupted: {done} of {len(ordered)} jobs are done and kept in {str(out)!r}; "
@@ -220,6 +221,7 @@ def run_batch(
             engine.close(cancel=True)
             display.close()
             report(final=True)
+            clean_stale(out)  # the stopped workers' scratch folders
             raise
         engine.close()
         display.close()

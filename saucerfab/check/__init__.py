@@ -99,9 +99,14 @@ def check_mesh(
             return Report.build(spath, fmt, [f], {"file_bytes": file_bytes}, printer=key, strict=strict,
                                 elapsed_s=time.perf_counter() - t0)
         fmt = md.format
+        import numpy as np
+
         from saucerfab.check.checks import run_checks
 
-        findings, stats = run_checks(md, prof, limits, file_bytes or 0)
+        # absurd but finite coordinates (1e300) overflow in products; the checks judge the results,
+        # and numpy's RuntimeWarnings would only be noise on the console
+        with np.errstate(all="ignore"):
+            findings, stats = run_checks(md, prof, limits, file_bytes or 0)
     except MemoryError:
         f = Finding("error", "over_check_limit", "ran out of memory: the file is too large for this machine; "
                                                  "lower Limits.max_triangles or use a bigger machine")

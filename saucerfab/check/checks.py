@@ -17,6 +17,7 @@ two interpenetrating boxes that this check flags).
 
 from __future__ import annotations
 
+import os
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -37,6 +38,10 @@ _TEXTURE_CODES = {
     "unsafe_path": "texture_path_unsafe",
 }
 _COLOUR_CAPABLE = {"3mf", "obj", "ply", "glb", "gltf", "wrl"}
+#: coordinates beyond this many millimetres count as unusable (see run_checks)
+_ABSURD_MM = 1e9
+#: candidate pairs per narrow-phase chunk (bounds the temporary arrays to ~100 MB)
+_PAIR_CHUNK = 150_000
 
 
 def _pt(p: np.ndarray) -> list[float]:
@@ -106,13 +111,14 @@ def run_checks(
         out.append(finding("units", f"{md.format.upper()} states no units; read as millimetres"))
     _printer_file_checks(md, profile, m, file_bytes, out)
 
-    finite = np.isfinite(V).all(axis=1)
+    # beyond 1e9 mm (1000 km) products of coordinates lose all precision or overflow: as unusable as NaN
+    finite = np.isfinite(V).all(axis=1) & (np.abs(V) <= _ABSURD_MM).all(axis=1)
     if not finite.all():
         bad = np.flatnonzero(~finite)
         out.append(finding(
             "non_finite",
-            f"{len(bad):,} vertices have NaN or infinite coordinates (first: vertex {int(bad[0])}); "
-            "fix the exporter - no printer can place them",
+            f"{len(bad):,} vertices have NaN, infinite or absurd (beyond 1e9 mm) coordinates (first: vertex "
+            f"{int(bad[0])}: {V[bad[0]].tolist()}); fix the exporter - no printer can place them",
             where=_where(vertices=bad, count=len(bad)),
         ))
         out.append(finding("check_skipped", "geometry, topology, thin walls and colour area were not measured: "
@@ -204,7 +210,7 @@ def run_checks(
         why = "the mesh is not closed and consistently oriented outward" if bvh is not None else "no sound faces"
         out.append(finding("check_skipped", f"wall thickness not measured: {why}"))
 
-    if closed:
+    if closed and limits.manifold3d_crosscheck:
         _manifold3d(Vu, Fw[~degenerate], out, stats)
 
     # ---- printer fit, units, colour
@@ -309,24 +315,35 @@ def _shell_report(topo: Any, shell_vol: np.ndarray, centroids: np.ndarray, out: 
 def _self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndarray, centroids: np.ndarray,
                         diag: float, limits: Limits, out: list[Finding], stats: dict[str, Any]) -> None:
     eps = 1e-9 * diag
-    ii, jj, complete = bvh.overlapping_pairs(tol=eps, budget=limits.max_pair_tests)
-    if len(ii) > limits.max_pair_tests:
-        ii, jj, complete = ii[: limits.max_pair_tests], jj[: limits.max_pair_tests], False
-    found: list[np.ndarray] = []
-    for s in range(0, len(ii), 500_000):
-        a, b = ii[s : s + 500_000], jj[s : s + 500_000]
-        shared = (Fg[a][:, :, None] == Fg[b][:, None, :]).any(axis=2).sum(axis=1)
-        keep = shared < 3
-        a, b, shared = a[keep], b[keep], shared[keep]
-        hit = tri_tri_intersect(tri[a], tri[b], shared, eps)
-        if hit.any():
-            found.append(np.stack([a[hit], b[hit]], axis=1))
+    m = len(tri)
+    # Budgets scale with the mesh (a sound mesh visits ~45 node pairs and keeps ~8 candidate pairs per
+    # triangle), capped by the limit, so a pile of overlapping triangles ends quickly as "partial".
+    visit_budget = min(limits.max_pair_tests, 200 * m + 1_000_000)
+    pair_budget = min(limits.max_pair_tests // 2, 40 * m + 1_000_000)
+    ii, jj, complete = bvh.overlapping_pairs(tol=eps, budget=visit_budget)
+    if len(ii) > pair_budget:
+        ii, jj, complete = ii[:pair_budget], jj[:pair_budget], False
+    def narrow(s: int) -> np.ndarray:
+        a, b = ii[s : s + _PAIR_CHUNK], jj[s : s + _PAIR_CHUNK]
+        hit = tri_tri_intersect(tri[a], tri[b], Fg[a], Fg[b], eps)
+        return np.stack([a[hit], b[hit]], axis=1)
+
+    starts = range(0, len(ii), _PAIR_CHUNK)
+    if len(starts) > 1:
+        # numpy releases the GIL in its loops: chunks in threads use a second core when there is one
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as ex:
+            found = list(ex.map(narrow, starts))
+    else:
+        found = [narrow(s) for s in starts]
     pairs = np.concatenate(found) if found else np.zeros((0, 2), dtype=np.int64)
     stats["self_intersecting_pairs"] = len(pairs)
     stats["self_intersection_check"] = "full" if complete else "partial"
     if not complete:
-        out.append(finding("check_partial", f"self-intersection search stopped at Limits.max_pair_tests "
-                                            f"({limits.max_pair_tests:,}); parts of the mesh were not compared"))
+        out.append(finding("check_partial", "self-intersection search stopped at its work budget (Limits.max_pair_tests"
+                                            f" = {limits.max_pair_tests:,}, scaled to the mesh): parts of the mesh "
+                                            "crowd together so densely that not all pairs were compared"))
     if len(pairs):
         faces = np.unique(gidx[pairs.ravel()])
         f0 = int(gidx[pairs[0, 0]])
@@ -341,7 +358,13 @@ def _self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndar
 def _thin_walls(bvh: BVH, tri: np.ndarray, normals: np.ndarray, areas: np.ndarray, gidx: np.ndarray, diag: float,
                 required: float | None, profile: PrinterProfile | None, limits: Limits,
                 out: list[Finding], stats: dict[str, Any]) -> None:
-    """Wall thickness by inward rays from area-weighted random surface points (fixed seed)."""
+    """Wall thickness by inward rays from area-weighted random surface points (fixed seed).
+
+    Each ray starts on the surface and runs against the face normal; the
+    distance to the first surface it meets that faces back at it is the
+    local wall thickness. Sampling is by area, so the share of thin samples
+    estimates the share of thin surface.
+    """
     k = int(limits.thin_wall_samples)
     total = float(areas.sum())
     if k <= 0 or total <= 0:
@@ -353,8 +376,13 @@ def _thin_walls(bvh: BVH, tri: np.ndarray, normals: np.ndarray, areas: np.ndarra
     w = np.stack([1 - s1, s1 * (1 - r2), s1 * r2], axis=1)
     pts = np.einsum("kj,kjd->kd", w, tri[f])
     dirs = -normals[f]
-    t, _, complete = bvh.first_hits(tri, pts, dirs, f, t_min=1e-7 * diag, budget=limits.max_ray_tests)
-    ok = np.isfinite(t)
+    budget = min(limits.max_ray_tests, 2000 * k + 20 * len(tri))
+    t, hit, complete = bvh.first_hits(tri, pts, dirs, f, t_min=1e-7 * diag, budget=budget)
+    # A wall is measured where the ray meets a surface facing back at it (normals more than 120 degrees
+    # apart). Near an edge whose faces meet at under 90 degrees the ray clips the neighbouring face at a
+    # tiny distance; that is a corner, not a wall, unless the wedge is sharper than 60 degrees.
+    ok = np.isfinite(t) & (hit >= 0)
+    ok[ok] &= np.einsum("ij,ij->i", normals[f[ok]], normals[hit[ok]]) < -0.5
     stats["thin_wall_samples"] = int(ok.sum())
     if not complete:
         out.append(finding("check_partial", f"wall-thickness rays stopped at Limits.max_ray_tests "

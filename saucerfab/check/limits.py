@@ -50,10 +50,12 @@ class Limits:
         max_nesting: deepest component/node/VRML nesting followed.
         thin_wall_samples: surface points whose wall thickness is measured
             by an inward ray.
-        max_ray_tests: cap on ray-triangle tests in the thin-wall estimate;
-            past it the estimate is marked partial rather than taking longer.
-        max_pair_tests: cap on triangle-pair tests in the self-intersection
-            check; past it the check is marked partial.
+        max_ray_tests: cap on box and triangle tests of the thin-wall rays
+            (the checks also scale it to the mesh); past it the estimate is
+            marked partial rather than taking longer.
+        max_pair_tests: cap on node-pair visits of the self-intersection
+            search (half of it on candidate triangle pairs; both also scaled
+            to the mesh); past it the check is marked partial.
         min_wall_mm: wall thickness to warn under when no printer is given
             (``None``: only report the estimate).
         texture_dpi_fraction: warn when the texture's resolution on the
@@ -62,6 +64,11 @@ class Limits:
             model in millimetres; outside it a unit warning is given.
         uv_tolerance: how far outside [0, 1] a texture coordinate may stray
             (rounding in exporters) before it counts as outside.
+        manifold3d_crosscheck: also build a manifold3d ``Manifold`` from a
+            mesh the checker found closed and report its status (an
+            independent second opinion on manifoldness; about 0.1 s per
+            100,000 triangles, so off by default - the tests hold the
+            checker's own topology to manifold3d's verdict instead).
     """
 
     max_file_bytes: int = 1 * GIB
@@ -78,12 +85,13 @@ class Limits:
     max_parts: int = 100_000
     max_nesting: int = 32
     thin_wall_samples: int = 4096
-    max_ray_tests: int = 40_000_000
+    max_ray_tests: int = 20_000_000
     max_pair_tests: int = 40_000_000
     min_wall_mm: float | None = None
     texture_dpi_fraction: float = 0.5
     plausible_size_mm: tuple[float, float] = (5.0, 5000.0)
     uv_tolerance: float = 1e-4
+    manifold3d_crosscheck: bool = False
 
     def with_(self, **changes: Any) -> Limits:
         """A copy with some limits changed (unknown names raise ``TypeError``)."""

@@ -109,18 +109,18 @@ class MeshBuilder:
 
     def reserve(self, n_vertices: int, n_faces: int, what: str = "") -> None:
         """Refuse (``over_check_limit``) before allocating a part over the caps."""
-        if self.nv + n_vertices > self.limits.max_vertices:
-            raise ReadError(
-                "over_check_limit",
-                f"{what or 'the file'} would bring the vertex count to {self.nv + n_vertices:,}, over the "
-                f"checker's limit of {self.limits.max_vertices:,} (Limits.max_vertices)",
-            )
         if self.nf + n_faces > self.limits.max_triangles:
             raise ReadError(
                 "over_check_limit",
                 f"{what or 'the file'} would bring the triangle count to {self.nf + n_faces:,}, over the "
                 f"checker's limit of {self.limits.max_triangles:,} (Limits.max_triangles; "
                 "--max-triangles raises it)",
+            )
+        if self.nv + n_vertices > self.limits.max_vertices:
+            raise ReadError(
+                "over_check_limit",
+                f"{what or 'the file'} would bring the vertex count to {self.nv + n_vertices:,}, over the "
+                f"checker's limit of {self.limits.max_vertices:,} (Limits.max_vertices)",
             )
         if self.parts + 1 > self.limits.max_parts:
             raise ReadError("over_check_limit", f"more than {self.limits.max_parts:,} mesh parts (Limits.max_parts)")

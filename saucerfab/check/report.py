@@ -68,7 +68,7 @@ CODES: dict[str, tuple[str, str]] = {
     "no_triangles": ("unreadable", "the file holds no triangles"),
     "internal_error": ("unreadable", "an unexpected failure inside the checker (a bug: please report it with the file)"),
     # -- geometry (errors)
-    "non_finite": ("error", "NaN or infinite coordinates"),
+    "non_finite": ("error", "NaN, infinite or absurd (beyond 1e9 mm) coordinates"),
     "degenerate_faces": ("error", "faces with a repeated vertex or zero area"),
     "duplicate_faces": ("error", "faces using the same three vertices as another face"),
     "not_watertight": ("error", "open edges: edges used by only one face"),
@@ -100,6 +100,7 @@ CODES: dict[str, tuple[str, str]] = {
     "extension_mismatch": ("warning", "the file's content is a different format than its name says"),
     "ignored_content": ("warning", "parts of the file the checker skipped (points, lines, unknown nodes)"),
     "units": ("info", "the units the file states or that were assumed"),
+    "from_archive": ("info", "the mesh was read from inside a zip (an OBJ + MTL + PNG upload bundle, say)"),
     "fits_rotated": ("info", "fits the build volume only with its axes swapped"),
     "check_partial": ("info", "a check stopped at a work limit; its result covers part of the mesh"),
     "check_skipped": ("info", "a check that could not run on this mesh (the reason is given)"),

@@ -122,10 +122,12 @@ def face_geometry(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     sum accurate for models far from the origin.
     """
     c = (V.min(axis=0) + V.max(axis=0)) / 2 if len(V) else np.zeros(3)
+    from saucerfab.check.bvh import cross3, dot3
+
     p0, p1, p2 = V[F[:, 0]] - c, V[F[:, 1]] - c, V[F[:, 2]] - c
-    cr = np.cross(p1 - p0, p2 - p0)
-    dbl = np.linalg.norm(cr, axis=1)
+    cr = cross3(p1 - p0, p2 - p0)
+    dbl = np.sqrt(dot3(cr, cr))
     with np.errstate(invalid="ignore", divide="ignore"):
         n = np.where(dbl[:, None] > 0, cr / np.where(dbl > 0, dbl, 1.0)[:, None], 0.0)
-    vol = np.einsum("ij,ij->i", p0, np.cross(p1, p2)) / 6.0
+    vol = dot3(p0, cross3(p1, p2)) / 6.0
     return dbl / 2, n, vol

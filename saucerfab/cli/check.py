@@ -44,6 +44,8 @@ def run(args: argparse.Namespace) -> int:
         if args.max_triangles <= 0:
             raise ConfigError(f"--max-triangles must be positive, got {args.max_triangles}")
         changes["max_triangles"] = args.max_triangles
+        # STL stores three vertices per triangle: keep the vertex cap in step
+        changes["max_vertices"] = max(Limits().max_vertices, 3 * args.max_triangles)
     if args.min_wall is not None:
         if not args.min_wall > 0:
             raise ConfigError(f"--min-wall must be positive millimetres, got {args.min_wall}")

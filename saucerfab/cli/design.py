@@ -25,6 +25,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--w-large", type=float, help="E_deform weight at sigma 1e-5 (default 0.08 rho)")
     p.add_argument("--w-small", type=float, help="E_deform weight at sigma 1e-7 (default 0.2 rho)")
     p.add_argument("--lam", type=float, help="E_sparse weight (default 6e-5 rho)")
+    p.add_argument(
+        "--barrier-weight",
+        type=float,
+        default=1.0,
+        help="weight of the log barriers (eq. 5); 1 = the paper as written",
+    )
     p.add_argument("--max-iters", type=int, default=400, help="iteration cap per stage (default 400)")
     p.add_argument(
         "--ablation",
@@ -70,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         w_small=args.w_small,
         lam=args.lam,
         max_iters=args.max_iters,
+        barrier_weight=args.barrier_weight,
         ablation=args.ablation,
         frames=args.frames,
         prism_placement=args.prism_placement,

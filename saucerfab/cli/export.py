@@ -66,12 +66,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def check_file(path: Path, profile: Any) -> Any | None:
-    """``saucerfab.check.check_mesh(path, printer=profile)``, or None where the checker is absent."""
+    """``saucerfab.check.check_mesh(path, printer=profile)``, or None where the checker is absent.
+
+    A zipped OBJ (``--zip-obj``) is checked as what the bureau unpacks: the
+    archive (written by us a moment ago, so its names are safe) goes to a
+    temporary folder and its ``.obj`` is checked with the MTL and PNG beside it.
+    """
     try:
-        from saucerfab.check import check_mesh  # type: ignore[attr-defined]
+        from saucerfab.check import check_mesh
     except ImportError:
         return None
-    return check_mesh(path, printer=profile)
+    if path.suffix != ".zip":
+        return check_mesh(path, printer=profile)
+    import tempfile
+    import zipfile
+
+    with tempfile.TemporaryDirectory(prefix="saucerfab-check-") as tmp, zipfile.ZipFile(path) as zf:
+        zf.extractall(tmp)
+        objs = sorted(Path(tmp).glob("*.obj"))
+        if not objs:
+            return check_mesh(path, printer=profile)
+        return check_mesh(objs[0], printer=profile)
 
 
 def _size(n: int) -> str:
@@ -129,7 +144,14 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         d = result.to_dict()
         d["checks"] = [
-            {"path": str(p), "verdict": getattr(r, "verdict", None), "exit_code": getattr(r, "exit_code", None)}
+            {
+                "path": str(p),
+                "verdict": getattr(r, "verdict", None),
+                "exit_code": getattr(r, "exit_code", None),
+                "findings": [
+                    {"severity": f.severity, "code": f.code, "message": f.message} for f in getattr(r, "findings", [])
+                ],
+            }
             for p, r in checks
         ]
         d["exit_code"] = exit_code

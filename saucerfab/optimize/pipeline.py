@@ -302,6 +302,7 @@ def run_design(
     # feasibility margin: the barrier is infinite on the boundary
     c = c.clamp(1e-4, 1 - 1e-4)
 
+    mu = request.barrier_weight
     h_e = h.clone()
     for si in range(first, len(stages)):
         spec: StageSpec = stages[si]
@@ -319,7 +320,7 @@ def run_design(
             ev = e_visual(imgs, _t)
             ed = deform(hh)
             eb = e_barrier(hh, z, cc, delta)
-            total = ev + _w * ed + eb
+            total = ev + _w * ed + mu * eb
             return total, {"E_visual": float(ev.detach()), "E_deform": float(ed.detach()), "E_barrier": float(eb.detach())}
 
         stage_t0 = time.perf_counter()
@@ -335,7 +336,7 @@ def run_design(
         settings = SolverSettings(
             max_iters=request.max_iters,
             lr_h=delta / 20,
-            energy_floor=barrier_floor(rig.num_vertices, rig.num_faces, delta),
+            energy_floor=mu * barrier_floor(rig.num_vertices, rig.num_faces, delta),
         )
         try:
             res = solve(objective, h, c, z, delta, settings, prox=prox, callback=cb)

@@ -29,6 +29,10 @@ class DesignRequest:
         w_large, w_small, lam: weights overriding the automatic rho-based ones
             (w for E_deform at sigma 1e-5 and 1e-7, lambda for E_sparse).
         max_iters: iteration cap per stage.
+        barrier_weight: weight of E_barrier (eq. 5) in the objective; 1 is the
+            paper as written. The barrier only has to keep iterates feasible
+            (the line search does too); a smaller weight lets colours reach
+            the enhancement's black and white (see RESULTS.md).
         ablation: one of "full" (the paper's method), "no_deform", "laplacian",
             "laplacian_bw", "sparse_only", "laplacian_sparse" (Figure 11 a-f).
         frames: "scene" keeps the scene's view frames (the paper's preset);
@@ -57,6 +61,7 @@ class DesignRequest:
     w_small: float | None = None
     lam: float | None = None
     max_iters: int = 400
+    barrier_weight: float = 1.0
     ablation: str = "full"
     frames: str = "scene"
     prism_placement: str = "auto"
@@ -77,6 +82,8 @@ class DesignRequest:
             raise ConfigError(f"prism_placement must be 'auto' or 'as_given', got {self.prism_placement!r}")
         if self.max_iters < 1:
             raise ConfigError(f"max_iters must be at least 1, got {self.max_iters}")
+        if not (self.barrier_weight > 0):
+            raise ConfigError(f"barrier_weight must be positive, got {self.barrier_weight!r}")
         for name in ("w_large", "w_small", "lam"):
             v = getattr(self, name)
             if v is not None and not (v >= 0):

@@ -1,199 +1,293 @@
-"""Hard (sigma -> 0) rasterization: nearest face wins. No gradients.
+"""Hard rasterization (nearest face wins, no gradients): previews and visibility.
 
-Used for visibility (which faces a view shows: texturing, targets,
-conflict areas), for textured previews at any resolution, and by the
-fabrication and check stages. Conventions are :mod:`saucerfab.render.camera`'s:
-pixel (i, j) has its centre at NDC ``((2j+1)/S - 1, 1 - (2i+1)/S)``; a pixel
-belongs to a face when its centre is inside the projected triangle (edges
-inclusive; between two faces sharing an edge the nearer, then the lower
-index, wins). No back-face culling (reflected meshes have flipped winding).
+The camera, NDC and pixel conventions are :mod:`saucerfab.render.camera`'s:
+pixel (i, j) samples the NDC point ``((2j + 1)/S - 1, 1 - (2i + 1)/S)``.
 
-Depth is the view-axis depth ``<v - eye, forward>``, interpolated
-perspective-correctly: ``1/z = sum_k b_k / z_k`` with screen-space
-barycentrics ``b``; the returned barycentrics are perspective-correct
-(``b_k z / z_k``), so attributes (UVs) interpolate as on the 3-D triangle.
-Faces with any vertex at depth <= ``near`` are skipped (behind the camera).
+A pixel centre is covered by a face when its screen-space barycentric
+coordinates are all >= 0 (edges and corners included, so a closed mesh has no
+cracks); of the faces covering it the one with the smallest depth wins, and
+on equal depth the lower face index (deterministic whatever the thread count).
+Faces with a corner at depth <= ``near`` (default 1e-6: at or behind the eye)
+are not drawn: there is no near-plane clipping, which the saucer scenes never
+need.
 
-The kernel is a serial numba loop over faces and their pixel boxes (cost
-follows covered pixels); :func:`rasterize_hard_reference` is the slow,
-obvious per-pixel version the tests compare it with.
+The kernel bins faces into bands of BAND image rows that one thread each owns
+whole (``prange`` over bands: no races, and the result does not depend on the
+thread count). The brute-force per-pixel ray-triangle reference is in
+``tests/render_reference.py``.
+
+Depth is the camera-space depth (distance along the view axis, model units),
+interpolated perspective-correctly: ``1/z = sum_k w_k / z_k`` with ``w`` the
+screen-space barycentrics. ``bary`` holds the perspective-correct barycentrics
+``b_k = z w_k / z_k`` of the visible point, so the world point is
+``sum_k b_k V_k`` and per-corner attributes (UVs) interpolate as ``sum_k b_k a_k``.
+
+Texture coordinates: u runs left to right, v bottom to top, over the whole
+texture (u, v in [0, 1]); texel (row r, column c) of an (H, W) texture has its
+centre at ``u = (c + 0.5)/W``, ``v = 1 - (r + 0.5)/H``. Sampling is bilinear
+with clamp-to-edge.
 """
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Any
 
+import numpy as np
+from numba import njit, prange
+
+from saucerfab.errors import ConfigError
 from saucerfab.render.camera import Camera
 
-_kernel = None
+#: rows per band of the image that one thread owns whole
+BAND = 16
 
 
-def _get_kernel():  # type: ignore[no-untyped-def]
-    global _kernel
-    if _kernel is not None:
-        return _kernel
-    import numba
+def _as_numpy(x: Any, name: str, dtype: Any) -> np.ndarray:
+    """Array from a numpy array or a torch tensor (detached, CPU)."""
+    if hasattr(x, "detach"):
+        x = x.detach().cpu().numpy()
+    try:
+        return np.ascontiguousarray(np.asarray(x, dtype=dtype))
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} must be a numeric array, got {type(x).__name__}") from None
 
-    @numba.njit(cache=True)
-    def kernel(sx, sy, z, faces, size, near, face_id, bary, depth):  # type: ignore[no-untyped-def]
-        nf = faces.shape[0]
-        for f in range(nf):
+
+def _check_mesh(vertices: Any, faces: Any) -> tuple[np.ndarray, np.ndarray]:
+    v = _as_numpy(vertices, "vertices", np.float64)
+    f = _as_numpy(faces, "faces", np.int64)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ConfigError(f"vertices must have shape (V, 3), got {v.shape}")
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise ConfigError(f"faces must have shape (F, 3), got {f.shape}")
+    if f.size and (f.min() < 0 or f.max() >= v.shape[0]):
+        raise ConfigError(f"faces index vertices {f.min()}..{f.max()}, but there are {v.shape[0]} vertices")
+    return v, f
+
+
+def _sized(camera: Camera, image_size: int | None) -> Camera:
+    if image_size is None:
+        return camera
+    if not isinstance(image_size, (int, np.integer)) or image_size < 1:
+        raise ConfigError(f"image_size must be a positive integer, got {image_size!r}")
+    return camera.with_size(int(image_size))
+
+
+@njit(cache=True)
+def _bin_rows(box: np.ndarray, n_bands: int):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Faces per band of BAND rows (CSR, in increasing face order)."""
+    count = np.zeros(n_bands + 1, np.int64)
+    for f in range(box.shape[0]):
+        if box[f, 1] >= box[f, 0] and box[f, 3] >= box[f, 2]:
+            for b in range(box[f, 0] // BAND, box[f, 1] // BAND + 1):
+                count[b + 1] += 1
+    start = np.cumsum(count)
+    fill = start[:-1].copy()
+    items = np.empty(start[-1], np.int64)
+    for f in range(box.shape[0]):
+        if box[f, 1] >= box[f, 0] and box[f, 3] >= box[f, 2]:
+            for b in range(box[f, 0] // BAND, box[f, 1] // BAND + 1):
+                items[fill[b]] = f
+                fill[b] += 1
+    return start, items
+
+
+@njit(parallel=True, cache=True)
+def _raster(proj, faces, size, near, face_id, bary, depth):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    n = faces.shape[0]
+    box = np.empty((n, 4), np.int64)
+    for f in prange(n):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        ok = proj[a, 2] > near and proj[b, 2] > near and proj[c, 2] > near
+        xs = (proj[a, 0], proj[b, 0], proj[c, 0])
+        ys = (proj[a, 1], proj[b, 1], proj[c, 1])
+        lox, hix = min(xs), max(xs)
+        loy, hiy = min(ys), max(ys)
+        ok = ok and np.isfinite(lox) and np.isfinite(hix) and np.isfinite(loy) and np.isfinite(hiy)
+        if not ok:
+            box[f, 0], box[f, 1], box[f, 2], box[f, 3] = 0, -1, 0, -1
+            continue
+        # centres inside the box: column j has x = (2j + 1)/S - 1, row i has y = 1 - (2i + 1)/S
+        box[f, 2] = max(int(np.ceil(min(max(((lox + 1) * size - 1) / 2, -1.0), size))), 0)
+        box[f, 3] = min(int(np.floor(min(max(((hix + 1) * size - 1) / 2, -1.0), size))), size - 1)
+        box[f, 0] = max(int(np.ceil(min(max(((1 - hiy) * size - 1) / 2, -1.0), size))), 0)
+        box[f, 1] = min(int(np.floor(min(max(((1 - loy) * size - 1) / 2, -1.0), size))), size - 1)
+    n_bands = (size + BAND - 1) // BAND
+    start, items = _bin_rows(box, n_bands)
+    for band in prange(n_bands):
+        for k in range(start[band], start[band + 1]):
+            f = items[k]
             a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-            za, zb, zc = z[a], z[b], z[c]
-            if za <= near or zb <= near or zc <= near:
-                continue
-            ax, ay, bx, by, cx, cy = sx[a], sy[a], sx[b], sy[b], sx[c], sy[c]
-            den = (by - cy) * (ax - cx) + (cx - bx) * (ay - cy)
-            if den == 0.0:
-                continue
-            x0 = max(int(np.floor(min(ax, bx, cx) - 0.5)), 0)
-            x1 = min(int(np.ceil(max(ax, bx, cx) - 0.5)), size - 1)
-            y0 = max(int(np.floor(min(ay, by, cy) - 0.5)), 0)
-            y1 = min(int(np.ceil(max(ay, by, cy) - 0.5)), size - 1)
-            for i in range(y0, y1 + 1):
-                py = i + 0.5
-                for j in range(x0, x1 + 1):
-                    px = j + 0.5
-                    w0 = ((by - cy) * (px - cx) + (cx - bx) * (py - cy)) / den
-                    w1 = ((cy - ay) * (px - cx) + (ax - cx) * (py - cy)) / den
-                    w2 = 1.0 - w0 - w1
-                    if w0 < -1e-12 or w1 < -1e-12 or w2 < -1e-12:
+            x0, y0, z0 = proj[a, 0], proj[a, 1], proj[a, 2]
+            x1, y1, z1 = proj[b, 0], proj[b, 1], proj[b, 2]
+            x2, y2, z2 = proj[c, 0], proj[c, 1], proj[c, 2]
+            det = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+            if det == 0.0:
+                continue  # a face seen edge-on covers no pixel centre
+            for i in range(max(box[f, 0], band * BAND), min(box[f, 1], band * BAND + BAND - 1) + 1):
+                py = 1 - (2 * i + 1) / size
+                for j in range(box[f, 2], box[f, 3] + 1):
+                    px = (2 * j + 1) / size - 1
+                    w1 = ((px - x0) * (y2 - y0) - (x2 - x0) * (py - y0)) / det
+                    w2 = ((x1 - x0) * (py - y0) - (px - x0) * (y1 - y0)) / det
+                    w0 = 1.0 - w1 - w2
+                    if w0 < 0 or w1 < 0 or w2 < 0:
                         continue
-                    inv = w0 / za + w1 / zb + w2 / zc
-                    zz = 1.0 / inv
-                    old = face_id[i, j]
-                    if old >= 0 and (zz > depth[i, j] or (zz == depth[i, j] and f > old)):
-                        continue
-                    face_id[i, j] = f
-                    depth[i, j] = zz
-                    bary[i, j, 0] = w0 * zz / za
-                    bary[i, j, 1] = w1 * zz / zb
-                    bary[i, j, 2] = w2 * zz / zc
-
-    _kernel = kernel
-    return kernel
+                    q0, q1, q2 = w0 / z0, w1 / z1, w2 / z2
+                    z = 1.0 / (q0 + q1 + q2)
+                    cur = face_id[i, j]
+                    if cur < 0 or z < depth[i, j] or (z == depth[i, j] and f < cur):
+                        face_id[i, j] = f
+                        depth[i, j] = z
+                        bary[i, j, 0], bary[i, j, 1], bary[i, j, 2] = q0 * z, q1 * z, q2 * z
 
 
-def _screen(vertices: np.ndarray, camera: Camera, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    p = camera.project(np.asarray(vertices, np.float64))
-    sx = (p[:, 0] + 1.0) * size / 2.0
-    sy = (1.0 - p[:, 1]) * size / 2.0
-    return sx, sy, p[:, 2]
-
-
-def _as_np(a, dtype):  # type: ignore[no-untyped-def]
-    if hasattr(a, "detach"):
-        a = a.detach().cpu().numpy()
-    return np.ascontiguousarray(np.asarray(a), dtype=dtype)
-
-
-def rasterize_hard(vertices, faces, camera: Camera, image_size: int | None = None, *, near: float = 1e-6):  # type: ignore[no-untyped-def]
-    """Nearest-face rasterization.
+def rasterize_hard(
+    vertices: Any, faces: Any, camera: Camera, image_size: int | None = None, *, near: float = 1e-6
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nearest-face rasterization of a mesh (no gradients).
 
     Args:
-        vertices: (V, 3) world positions (numpy or torch), model units.
-        faces: (F, 3) int vertex indices.
-        camera: the view; ``image_size`` overrides its size S.
-        near: faces with a vertex at depth <= near are skipped.
+        vertices: World positions, shape [V, 3], model units (numpy or torch).
+        faces: Vertex indices, shape [F, 3], integer. Both windings are drawn.
+        camera: The view.
+        image_size: Output size S; default ``camera.image_size``.
+        near: Faces with a corner at depth <= near (model units) are skipped.
+
     Returns:
-        ``face_id`` (S, S) int64 (-1 where no face), ``bary`` (S, S, 3)
-        float64 perspective-correct barycentrics, ``depth`` (S, S) float64
-        view-axis depth (+inf where no face). numpy arrays.
+        A tuple of numpy arrays ``(face_id, bary, depth)``:
+
+        - **face_id** - Visible face per pixel, shape [S, S], int64, -1 for background.
+        - **bary** - Perspective-correct barycentrics of the visible point on its
+          face, shape [S, S, 3], float64, summing to 1 (0 on background).
+        - **depth** - Camera-space depth of the visible point, shape [S, S],
+          float64, model units (``inf`` on background).
+
+    Raises:
+        ConfigError: arrays of the wrong shape, indices out of range, a bad image size.
     """
-    size = int(image_size or camera.image_size)
-    v = _as_np(vertices, np.float64)
-    f = _as_np(faces, np.int64)
-    face_id = np.full((size, size), -1, np.int64)
-    bary = np.zeros((size, size, 3), np.float64)
-    depth = np.full((size, size), np.inf, np.float64)
-    if f.shape[0] == 0:
-        return face_id, bary, depth
-    sx, sy, z = _screen(v, camera, size)
-    _get_kernel()(sx, sy, z, f, size, float(near), face_id, bary, depth)
+    v, f = _check_mesh(vertices, faces)
+    cam = _sized(camera, image_size)
+    s = cam.image_size
+    proj = np.ascontiguousarray(cam.project(v)) if v.shape[0] else np.zeros((0, 3))
+    face_id = np.full((s, s), -1, np.int64)
+    bary = np.zeros((s, s, 3))
+    depth = np.full((s, s), np.inf)
+    if f.shape[0]:
+        _raster(proj, f, s, float(near), face_id, bary, depth)
     return face_id, bary, depth
 
 
-def rasterize_hard_reference(vertices, faces, camera: Camera, image_size: int | None = None):  # type: ignore[no-untyped-def]
-    """The slow, obvious version: every pixel against every face (tiny scenes only)."""
-    size = int(image_size or camera.image_size)
-    v = _as_np(vertices, np.float64)
-    f = _as_np(faces, np.int64)
-    sx, sy, z = _screen(v, camera, size)
-    face_id = np.full((size, size), -1, np.int64)
-    bary = np.zeros((size, size, 3))
-    depth = np.full((size, size), np.inf)
-    for i in range(size):
-        for j in range(size):
-            px, py = j + 0.5, i + 0.5
-            for k, (a, b, c) in enumerate(f):
-                if min(z[a], z[b], z[c]) <= 1e-6:
-                    continue
-                den = (sy[b] - sy[c]) * (sx[a] - sx[c]) + (sx[c] - sx[b]) * (sy[a] - sy[c])
-                if den == 0:
-                    continue
-                w0 = ((sy[b] - sy[c]) * (px - sx[c]) + (sx[c] - sx[b]) * (py - sy[c])) / den
-                w1 = ((sy[c] - sy[a]) * (px - sx[c]) + (sx[a] - sx[c]) * (py - sy[c])) / den
-                w2 = 1 - w0 - w1
-                if min(w0, w1, w2) < -1e-12:
-                    continue
-                zz = 1 / (w0 / z[a] + w1 / z[b] + w2 / z[c])
-                if zz < depth[i, j]:
-                    depth[i, j] = zz
-                    face_id[i, j] = k
-                    bary[i, j] = [w0 * zz / z[a], w1 * zz / z[b], w2 * zz / z[c]]
-    return face_id, bary, depth
+def _background(background: Any) -> np.ndarray:
+    bg = np.asarray(background, dtype=np.float64)
+    if bg.shape != (3,) or not np.isfinite(bg).all():
+        raise ConfigError(f"background must be 3 finite numbers (RGB), got {background!r}")
+    return bg
+
+
+def render_face_colors_hard(
+    vertices: Any,
+    faces: Any,
+    face_colors: Any,
+    camera: Camera,
+    background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    image_size: int | None = None,
+) -> np.ndarray:
+    """Nearest-face preview with one colour per face.
+
+    Args:
+        vertices: World positions, shape [V, 3], model units.
+        faces: Vertex indices, shape [F, 3].
+        face_colors: RGB per face, shape [F, 3], in [0, 1].
+        camera: The view.
+        background: RGB where no face is seen.
+        image_size: Output size S; default ``camera.image_size``.
+
+    Returns:
+        Image, shape [S, S, 3], float64, row 0 at the top.
+    """
+    _, f = _check_mesh(vertices, faces)
+    colors = _as_numpy(face_colors, "face_colors", np.float64)
+    if colors.shape != (f.shape[0], 3):
+        raise ConfigError(f"face_colors must have shape ({f.shape[0]}, 3), got {colors.shape}")
+    bg = _background(background)
+    face_id, _, _ = rasterize_hard(vertices, faces, camera, image_size)
+    image = np.empty(face_id.shape + (3,))
+    image[:] = bg
+    seen = face_id >= 0
+    image[seen] = colors[face_id[seen]]
+    return image
 
 
 def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear samples of ``texture`` (H, W, C) at ``uv`` (..., 2), u right, v up, clamped.
-
-    Texel (r, c) has its centre at ``u = (c + 0.5) / W``, ``v = 1 - (r + 0.5) / H``.
-    Returns float64 (..., C) in the texture's units (uint8 textures give 0..1).
-    """
-    tex = texture.astype(np.float64) / (255.0 if texture.dtype == np.uint8 else 1.0)
-    h, w = tex.shape[:2]
-    x = np.clip(uv[..., 0] * w - 0.5, 0, w - 1)
-    y = np.clip((1.0 - uv[..., 1]) * h - 0.5, 0, h - 1)
-    x0 = np.minimum(np.floor(x).astype(np.int64), max(w - 2, 0))
-    y0 = np.minimum(np.floor(y).astype(np.int64), max(h - 2, 0))
-    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
-    tx, ty = (x - x0)[..., None], (y - y0)[..., None]
-    top = tex[y0, x0] * (1 - tx) + tex[y0, x1] * tx
-    bot = tex[y1, x0] * (1 - tx) + tex[y1, x1] * tx
-    return top * (1 - ty) + bot * ty
-
-
-def render_textured(  # type: ignore[no-untyped-def]
-    vertices, faces, face_uvs, texture, camera: Camera, background=(1.0, 1.0, 1.0), image_size: int | None = None
-) -> np.ndarray:
-    """Hard render with per-corner UVs and a texture.
+    """Bilinear lookup with clamp-to-edge.
 
     Args:
-        face_uvs: (F, 3, 2) texture coordinates of each face corner (u right, v up).
-        texture: (H, W, 3) uint8 or float in [0, 1].
+        texture: Shape [H, W, C], uint8 (0..255, returned as 0..1) or float.
+        uv: Texture coordinates, shape [..., 2] (u left to right, v bottom to top).
+
     Returns:
-        (S, S, 3) float64 in [0, 1].
+        Samples, shape [..., C], float64.
     """
-    fid, bary, _ = rasterize_hard(vertices, faces, camera, image_size)
-    uvs = _as_np(face_uvs, np.float64)
-    tex = texture.detach().cpu().numpy() if hasattr(texture, "detach") else np.asarray(texture)
-    size = fid.shape[0]
-    out = np.tile(np.asarray(background, np.float64), (size, size, 1))
-    hit = fid >= 0
-    if hit.any():
-        uv = np.einsum("kc,kcd->kd", bary[hit], uvs[fid[hit]])
-        out[hit] = sample_texture(tex, uv)
-    return out
+    if texture.dtype == np.uint8:
+        texture = texture.astype(np.float64) / 255.0
+    h, w = texture.shape[:2]
+    x = uv[..., 0] * w - 0.5  # texel centres at u = (c + 0.5)/W
+    y = (1.0 - uv[..., 1]) * h - 0.5  # row 0 is the top, v = 1
+    x0 = np.floor(x)
+    y0 = np.floor(y)
+    fx = (x - x0)[..., None]
+    fy = (y - y0)[..., None]
+    x0i = np.clip(x0.astype(np.int64), 0, w - 1)
+    x1i = np.clip(x0.astype(np.int64) + 1, 0, w - 1)
+    y0i = np.clip(y0.astype(np.int64), 0, h - 1)
+    y1i = np.clip(y0.astype(np.int64) + 1, 0, h - 1)
+    top = texture[y0i, x0i] * (1 - fx) + texture[y0i, x1i] * fx
+    bottom = texture[y1i, x0i] * (1 - fx) + texture[y1i, x1i] * fx
+    return top * (1 - fy) + bottom * fy
 
 
-def render_face_colors_hard(  # type: ignore[no-untyped-def]
-    vertices, faces, face_colors, camera: Camera, background=(1.0, 1.0, 1.0), image_size: int | None = None
+def render_textured(
+    vertices: Any,
+    faces: Any,
+    face_uvs: Any,
+    texture: Any,
+    camera: Camera,
+    background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    image_size: int | None = None,
 ) -> np.ndarray:
-    """Hard render with one colour per face: (S, S, 3) float64."""
-    fid, _, _ = rasterize_hard(vertices, faces, camera, image_size)
-    cols = _as_np(face_colors, np.float64)
-    size = fid.shape[0]
-    out = np.tile(np.asarray(background, np.float64), (size, size, 1))
-    hit = fid >= 0
-    out[hit] = cols[fid[hit]]
-    return out
+    """Nearest-face preview of a textured mesh (perspective-correct UVs, bilinear).
+
+    Args:
+        vertices: World positions, shape [V, 3], model units.
+        faces: Vertex indices, shape [F, 3].
+        face_uvs: UV of each face corner, shape [F, 3, 2] (u left to right,
+            v bottom to top, [0, 1] spans the texture).
+        texture: Shape [H, W, 3], uint8 (0..255) or float (0..1); row 0 is the top.
+        camera: The view.
+        background: RGB where no face is seen.
+        image_size: Output size S; default ``camera.image_size``.
+
+    Returns:
+        Image, shape [S, S, 3], float64 in [0, 1], row 0 at the top.
+    """
+    _, f = _check_mesh(vertices, faces)
+    uvs = _as_numpy(face_uvs, "face_uvs", np.float64)
+    if uvs.shape != (f.shape[0], 3, 2):
+        raise ConfigError(f"face_uvs must have shape ({f.shape[0]}, 3, 2), got {uvs.shape}")
+    tex = np.asarray(texture.detach().cpu().numpy() if hasattr(texture, "detach") else texture)
+    if tex.ndim != 3 or tex.shape[2] != 3 or tex.shape[0] < 1 or tex.shape[1] < 1:
+        raise ConfigError(f"texture must have shape (H, W, 3), got {tex.shape}")
+    if tex.dtype == np.uint8:
+        tex = tex.astype(np.float64) / 255.0
+    elif np.issubdtype(tex.dtype, np.floating):
+        tex = tex.astype(np.float64)
+    else:
+        raise ConfigError(f"texture must be uint8 (0..255) or float (0..1), got {tex.dtype}")
+    bg = _background(background)
+    face_id, bary, _ = rasterize_hard(vertices, faces, camera, image_size)
+    image = np.empty(face_id.shape + (3,))
+    image[:] = bg
+    seen = face_id >= 0
+    uv = np.einsum("nk,nkc->nc", bary[seen], uvs[face_id[seen]])
+    image[seen] = sample_texture(tex, uv)
+    return image

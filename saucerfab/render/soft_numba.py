@@ -49,7 +49,7 @@ if TYPE_CHECKING:
 LANES = 8
 #: tile size in pixels (wide, so few faces' column spans are cut in two)
 TILE_W = 64
-TILE_H = 16
+TILE_H = 32
 #: row stride of the tile-local state: room for a lane group starting at the last column
 SW = TILE_W + LANES
 #: distance between the fields of the tile-local state
@@ -104,10 +104,11 @@ def _face_boxes(cxy: np.ndarray, radius: float, size: int) -> np.ndarray:  # pra
 def _bin_faces(box: np.ndarray, n_ty: int, n_tx: int):  # type: ignore[no-untyped-def] # pragma: no cover
     """Bin faces into tiles.
 
-    Returns ``(tile_start (T+1,), tile_entry (E,), entry_face (E,), face_start (F+1,))``:
-    entry ids are numbered face by face (a face's entries are contiguous, so its
-    gradient slots are summed in a fixed order), and each tile's entries are in
-    increasing face order.
+    Returns ``(tile_start (T+1,), tile_entry (E,), entry_face (E,), face_start (F+1,),
+    row_start (E+1,))``: entry ids are numbered face by face (a face's entries are
+    contiguous, so its gradient slots are summed in a fixed order), each tile's
+    entries are in increasing face order, and entry e's rows within its tile have
+    the slots row_start[e] .. row_start[e+1]-1 of the per-row valid ranges.
     """
     n = box.shape[0]
     n_tiles = n_ty * n_tx
@@ -126,6 +127,7 @@ def _bin_faces(box: np.ndarray, n_ty: int, n_tx: int):  # type: ignore[no-untype
     n_entries = face_start[n]
     tile_entry = np.empty(n_entries, np.int64)
     entry_face = np.empty(n_entries, np.int64)
+    row_start = np.zeros(n_entries + 1, np.int64)
     fill = tile_start[:-1].copy()
     e = 0
     for f in range(n):
@@ -137,8 +139,10 @@ def _bin_faces(box: np.ndarray, n_ty: int, n_tx: int):  # type: ignore[no-untype
                     tile_entry[fill[t]] = e
                     fill[t] += 1
                     entry_face[e] = f
+                    rows = min(r1, ty * TILE_H + TILE_H - 1) - max(r0, ty * TILE_H) + 1
+                    row_start[e + 1] = row_start[e] + rows
                     e += 1
-    return tile_start, tile_entry, entry_face, face_start
+    return tile_start, tile_entry, entry_face, face_start, row_start
 
 
 # --------------------------------------------------------------------------- forward
@@ -168,10 +172,11 @@ def _face_consts(f, cxy, ee_min, one):  # type: ignore[no-untyped-def] # pragma:
 
 @njit(**_OPTS)
 def _forward_tile(
-    t, n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col, px_tab, py_tab, K,
-    image, alpha, st_m, st_s, st_p,
+    t, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab, K,
+    image, alpha, st_m, st_s, st_p, row_lo, row_hi,
 ):  # type: ignore[no-untyped-def] # pragma: no cover - jit
-    """Render tile ``t``: write ``image``/``alpha`` and the backward's per-pixel state."""
+    """Render tile ``t``: write ``image``/``alpha``, the backward's per-pixel state and,
+    per (entry, row), the first and last lane where the pair is not skipped."""
     ty, tx = t // n_tx, t % n_tx
     rt0, ct0 = ty * TILE_H, tx * TILE_W
     zero, one = K[K_ZERO], K[K_ONE]
@@ -189,7 +194,8 @@ def _forward_tile(
         st[5 * NLOC + q] = one
 
     for idx in range(tile_start[t], tile_start[t + 1]):
-        f = entry_face[tile_entry[idx]]
+        entry = tile_entry[idx]
+        f = entry_face[entry]
         ra, rb = max(box[f, 0], rt0), min(box[f, 1], rt0 + TILE_H - 1)
         ca, cbx = max(box[f, 2], ct0), min(box[f, 3], ct0 + TILE_W - 1)
         if rb < ra or cbx < ca:
@@ -202,9 +208,13 @@ def _forward_tile(
         i20, i21, i22 = inv[f, 6], inv[f, 7], inv[f, 8]
         iz0, iz1, iz2 = iz[f, 0], iz[f, 1], iz[f, 2]
         fr, fg, fb = col[f, 0], col[f, 1], col[f, 2]
-        # whole lane groups: a fixed-width loop without remainder
+        # whole lane groups: a fixed-width loop without remainder; lanes past
+        # the box (the last group's tail) are masked out like skipped pairs
+        span = np.int32(cbx - ca + 1)
         n = (cbx - ca + LANES) // LANES * LANES
+        n32, m32 = np.int32(n), np.int32(-1)
         pxv = px_tab[ca:]
+        rs = row_start[entry] - ra
         for r in range(ra, rb + 1):
             py = py_tab[r]
             b0 = i01 * py + i02
@@ -214,6 +224,7 @@ def _forward_tile(
             # a view indexed by the loop counter plus constants: no negative-index
             # wraparound, so LLVM sees unit-stride accesses and vectorizes
             sv = st[(r - rt0) * SW + (ca - ct0):]
+            lo, hi = n32, m32
             for lane in range(n):
                 px = pxv[lane]
                 w0 = i00 * px + b0
@@ -233,7 +244,11 @@ def _forward_tile(
                 tt = min(max((hx * ex2 + hy2 * ey2) * ie2, zero), one)
                 dx, dy = tt * ex2 - hx, tt * ey2 - hy2
                 d2 = min(d2, dx * dx + dy * dy)
-                valid = inside | (d2 < thr)
+                # int32 lane numbers: 64-bit ones would halve the vector width
+                l32 = np.int32(lane)
+                valid = (inside | (d2 < thr)) & (l32 < span)
+                lo = min(lo, l32 if valid else n32)
+                hi = max(hi, l32 if valid else m32)
                 xs = (d2 if inside else -d2) * inv_sigma
                 ex = vexp(-abs(xs))
                 rec = one / (one + ex)
@@ -262,6 +277,9 @@ def _forward_tile(
                 sv[2 * NLOC + lane] = sv[2 * NLOC + lane] * scale + term * fr
                 sv[3 * NLOC + lane] = sv[3 * NLOC + lane] * scale + term * fg
                 sv[4 * NLOC + lane] = sv[4 * NLOC + lane] * scale + term * fb
+            # the backward needs only the lanes from lo to hi of this row
+            row_lo[rs + r] = lo
+            row_hi[rs + r] = hi
 
     for r in range(rt0, min(rt0 + TILE_H, size)):
         for c in range(ct0, min(ct0 + TILE_W, size)):
@@ -279,14 +297,14 @@ def _forward_tile(
 
 @njit(parallel=True, **_OPTS)
 def _forward(
-    order, n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col, px_tab, py_tab, K,
-    image, alpha, st_m, st_s, st_p,
+    order, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab,
+    K, image, alpha, st_m, st_s, st_p, row_lo, row_hi,
 ):  # type: ignore[no-untyped-def] # pragma: no cover - jit
     for k in prange(order.shape[0]):
         old = ftz_on()
         _forward_tile(
-            order[k], n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col,
-            px_tab, py_tab, K, image, alpha, st_m, st_s, st_p,
+            order[k], n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col,
+            px_tab, py_tab, K, image, alpha, st_m, st_s, st_p, row_lo, row_hi,
         )
         ftz_restore(old)
 
@@ -314,8 +332,8 @@ def _lane_dot(a, b, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
 
 @njit(**_OPTS)
 def _backward_tile(
-    t, n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col, px_tab, py_tab, K,
-    image, g_image, g_alpha, st_m, st_s, st_p, grad,
+    t, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab, K,
+    image, g_image, g_alpha, st_m, st_s, st_p, row_lo, row_hi, grad,
 ):  # type: ignore[no-untyped-def] # pragma: no cover - jit
     """Gradients of tile ``t``'s pixels into the slots ``grad[entry]`` of its entries."""
     ty, tx = t // n_tx, t % n_tx
@@ -353,9 +371,13 @@ def _backward_tile(
             for j in range(N_GRAD):
                 grad[entry, j] = zero
             continue
-        n = (cbx - ca + LANES) // LANES * LANES
-        acc[:] = zero
-        av = acc[ca - ct0:]  # accumulator j of lane k is av[j * SW + k]
+        # a row's lanes start at its first unskipped pair (the forward's row_lo)
+        # and may run up to LANES - 1 past the box; m covers every row's lanes
+        m = min(cbx - ca + LANES, SW - (ca - ct0))
+        ac = acc[ca - ct0:]  # accumulator j of column ca + k is ac[j * SW + k]
+        for j in range(N_ACC):  # clear only the columns this entry uses
+            ac[j * SW:j * SW + m] = zero
+        rs = row_start[entry] - ra
         ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2 = _face_consts(
             f, cxy, ee_min, one
         )
@@ -364,14 +386,20 @@ def _backward_tile(
         i20, i21, i22 = inv[f, 6], inv[f, 7], inv[f, 8]
         iz0, iz1, iz2 = iz[f, 0], iz[f, 1], iz[f, 2]
         fr, fg, fb = col[f, 0], col[f, 1], col[f, 2]
-        pxv = px_tab[ca:]
         for r in range(ra, rb + 1):
+            lo, hi = row_lo[rs + r], row_hi[rs + r]
+            if hi < lo:
+                continue  # every pair of this row is skipped
+            n = (hi - lo + LANES) // LANES * LANES
+            last = np.int32(hi - lo)
             py = py_tab[r]
             b0 = i01 * py + i02
             b1 = i11 * py + i12
             b2 = i21 * py + i22
             hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
-            sv = st[(r - rt0) * SW + (ca - ct0):]
+            sv = st[(r - rt0) * SW + (ca + lo - ct0):]
+            av = ac[lo:]
+            pxv = px_tab[ca + lo:]
             for lane in range(n):
                 px = pxv[lane]
                 w0 = i00 * px + b0
@@ -404,7 +432,8 @@ def _backward_tile(
                 bdy = dy if e2sel else bdy
                 e1sel = e1sel & (not e2sel)
                 e0sel = not (e1sel | e2sel)
-                valid = inside | (d2 < thr)
+                # lanes past hi are pairs the forward masked out (beyond the box)
+                valid = (inside | (d2 < thr)) & (np.int32(lane) <= last)
                 xs = (d2 if inside else -d2) * inv_sigma
                 ex = vexp(-abs(xs))
                 rec = one / (one + ex)
@@ -441,12 +470,13 @@ def _backward_tile(
                 av[3 * SW + lane] += v * k1
                 av[4 * SW + lane] += u * k2
                 av[5 * SW + lane] += v * k2
-                # depth: zn = (far - z)/(far - near), z = sw / num, num = sum_k wc_k iz_k;
-                # dL/dnum = dL/dzn * z / ((far - near) num); num depends on iz_k and on
-                # wc_k directly and through sw = sum wc (when not clamped)
-                gnum = gw * wf * inv_gamma * inv_fr * z * rnum
-                gnum = gnum if rgb else zero
-                zsub = gnum * z if rsw >= wsum_min else zero  # the sw term: -dL/dsw
+                # depth: zn = (far - z)/(far - near), z = sw / num, num = sum_k wc_k iz_k,
+                # sw = max(sum_k wc_k, wsum_min): with gzr = -dL/dz / num,
+                # dL/dnum = gzr z and dL/dsw = -gzr
+                gzr = gw * wf * inv_gamma * inv_fr * rnum
+                gzr = gzr if rgb else zero
+                gnum = gzr * z
+                zsub = gzr if rsw >= wsum_min else zero
                 gw0 = gnum * iz0 - zsub
                 gw1 = gnum * iz1 - zsub
                 gw2 = gnum * iz2 - zsub
@@ -466,39 +496,109 @@ def _backward_tile(
                 av[15 * SW + lane] += sv[NLOC + lane] * wf
                 av[16 * SW + lane] += sv[2 * NLOC + lane] * wf
                 av[17 * SW + lane] += sv[3 * NLOC + lane] * wf
+        pxa = px_tab[ca:]
         for j in range(6):
-            grad[entry, j] = _lane_sum(av[j * SW:], n)
+            grad[entry, j] = _lane_sum(ac[j * SW:], m)
         for k in range(3):  # barycentric matrix row k: (x, y, 1) coefficients
-            grad[entry, 6 + 3 * k] = _lane_dot(av[(6 + k) * SW:], pxv, n)
-            grad[entry, 7 + 3 * k] = _lane_sum(av[(9 + k) * SW:], n)
-            grad[entry, 8 + 3 * k] = _lane_sum(av[(6 + k) * SW:], n)
+            grad[entry, 6 + 3 * k] = _lane_dot(ac[(6 + k) * SW:], pxa, m)
+            grad[entry, 7 + 3 * k] = _lane_sum(ac[(9 + k) * SW:], m)
+            grad[entry, 8 + 3 * k] = _lane_sum(ac[(6 + k) * SW:], m)
         for j in range(6):
-            grad[entry, 15 + j] = _lane_sum(av[(12 + j) * SW:], n)
+            grad[entry, 15 + j] = _lane_sum(ac[(12 + j) * SW:], m)
 
 
 @njit(parallel=True, **_OPTS)
 def _backward(
-    order, n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col, px_tab, py_tab, K,
-    image, g_image, g_alpha, st_m, st_s, st_p, grad,
+    order, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab,
+    K, image, g_image, g_alpha, st_m, st_s, st_p, row_lo, row_hi, grad,
 ):  # type: ignore[no-untyped-def] # pragma: no cover - jit
     for k in prange(order.shape[0]):
         old = ftz_on()
         _backward_tile(
-            order[k], n_tx, size, wp, tile_start, tile_entry, entry_face, box, cxy, inv, iz, col,
-            px_tab, py_tab, K, image, g_image, g_alpha, st_m, st_s, st_p, grad,
+            order[k], n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col,
+            px_tab, py_tab, K, image, g_image, g_alpha, st_m, st_s, st_p, row_lo, row_hi, grad,
         )
         ftz_restore(old)
 
 
+# --------------------------------------------------------------------------- per-face setup and chain rule
+
+
 @njit(parallel=True, **_OPTS)
-def _sum_entries(grad: np.ndarray, face_start: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
-    """out[f] = sum of face f's entry slots, in entry order (deterministic)."""
-    for f in prange(out.shape[0]):
-        for j in range(N_GRAD):
-            out[f, j] = 0
+def _face_setup(proj, faces, det_eps):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Per-face kernel inputs from the projected vertices (V, 3) = (x_ndc, y_ndc, depth).
+
+    Returns corners ``cxy`` (F, 6), SoftRas's barycentric matrix ``inv`` (F, 9)
+    (adjugate over the determinant clamped to magnitude >= det_eps, keeping its
+    sign), ``iz`` (F, 3) = 1 / corner depth, and ``det`` (F,) unclamped.
+    """
+    n = faces.shape[0]
+    dt = proj.dtype
+    cxy = np.empty((n, 6), dt)
+    inv = np.empty((n, 9), dt)
+    iz = np.empty((n, 3), dt)
+    det = np.empty(n, dt)
+    for f in prange(n):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        x0, y0, x1, y1, x2, y2 = proj[a, 0], proj[a, 1], proj[b, 0], proj[b, 1], proj[c, 0], proj[c, 1]
+        cxy[f, 0], cxy[f, 1], cxy[f, 2], cxy[f, 3], cxy[f, 4], cxy[f, 5] = x0, y0, x1, y1, x2, y2
+        d = x2 * (y0 - y1) + x0 * (y1 - y2) + x1 * (y2 - y0)
+        det[f] = d
+        dc = max(d, det_eps) if d > 0 else min(d, -det_eps)
+        inv[f, 0], inv[f, 1], inv[f, 2] = (y1 - y2) / dc, (x2 - x1) / dc, (x1 * y2 - x2 * y1) / dc
+        inv[f, 3], inv[f, 4], inv[f, 5] = (y2 - y0) / dc, (x0 - x2) / dc, (x2 * y0 - x0 * y2) / dc
+        inv[f, 6], inv[f, 7], inv[f, 8] = (y0 - y1) / dc, (x1 - x0) / dc, (x0 * y1 - x1 * y0) / dc
+        iz[f, 0], iz[f, 1], iz[f, 2] = 1 / proj[a, 2], 1 / proj[b, 2], 1 / proj[c, 2]
+    return cxy, inv, iz, det
+
+
+@njit(parallel=True, **_OPTS)
+def _face_grads(grad, face_start, cxy, inv, iz, det, det_eps, g_corner, g_col):  # type: ignore[no-untyped-def] # pragma: no cover
+    """Sum each face's entry slots (in entry order: deterministic) and apply the
+    chain rule through :func:`_face_setup`: ``g_corner[f, k]`` = dL/d(x, y, depth)
+    of corner k, ``g_col[f]`` = dL/dcolour."""
+    for f in prange(cxy.shape[0]):
+        g = np.zeros(N_GRAD, grad.dtype)
         for e in range(face_start[f], face_start[f + 1]):
             for j in range(N_GRAD):
-                out[f, j] += grad[e, j]
+                g[j] += grad[e, j]
+        x0, y0, x1, y1, x2, y2 = cxy[f, 0], cxy[f, 1], cxy[f, 2], cxy[f, 3], cxy[f, 4], cxy[f, 5]
+        d = det[f]
+        dc = max(d, det_eps) if d > 0 else min(d, -det_eps)
+        # inv = adj / dc: d inv = d adj / dc - inv d(dc) / dc, and dc is constant
+        # where the clamp holds it (torch.clamp passes the gradient at the bound)
+        g00, g01, g02 = g[6] / dc, g[7] / dc, g[8] / dc
+        g10, g11, g12 = g[9] / dc, g[10] / dc, g[11] / dc
+        g20, g21, g22 = g[12] / dc, g[13] / dc, g[14] / dc
+        h = 0.0
+        if (d > 0 and d >= det_eps) or (d <= 0 and d <= -det_eps):
+            for j in range(9):
+                h += g[6 + j] * inv[f, j]
+            h /= dc
+        g_corner[f, 0] = g[0] + g11 - g21 - g12 * y2 + g22 * y1 - h * (y1 - y2)
+        g_corner[f, 1] = g[1] - g10 + g20 + g12 * x2 - g22 * x1 - h * (x2 - x1)
+        g_corner[f, 3] = g[2] - g01 + g21 + g02 * y2 - g22 * y0 - h * (y2 - y0)
+        g_corner[f, 4] = g[3] + g00 - g20 - g02 * x2 + g22 * x0 - h * (x0 - x2)
+        g_corner[f, 6] = g[4] + g01 - g11 - g02 * y1 + g12 * y0 - h * (y0 - y1)
+        g_corner[f, 7] = g[5] - g00 + g10 + g02 * x1 - g12 * x0 - h * (x1 - x0)
+        # iz = 1 / depth
+        g_corner[f, 2] = -g[15] * iz[f, 0] * iz[f, 0]
+        g_corner[f, 5] = -g[16] * iz[f, 1] * iz[f, 1]
+        g_corner[f, 8] = -g[17] * iz[f, 2] * iz[f, 2]
+        g_col[f, 0], g_col[f, 1], g_col[f, 2] = g[18], g[19], g[20]
+
+
+@njit(**_OPTS)
+def _scatter_vertices(g_corner, faces, n_vertices):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """(V, 3) sums of the corner gradients per vertex, in face order (deterministic)."""
+    out = np.zeros((n_vertices, 3), g_corner.dtype)
+    for f in range(faces.shape[0]):
+        for k in range(3):
+            v = faces[f, k]
+            out[v, 0] += g_corner[f, 3 * k]
+            out[v, 1] += g_corner[f, 3 * k + 1]
+            out[v, 2] += g_corner[f, 3 * k + 2]
+    return out
 
 
 # --------------------------------------------------------------------------- torch glue
@@ -543,6 +643,7 @@ class _Bins:
     tile_entry: np.ndarray
     entry_face: np.ndarray
     face_start: np.ndarray
+    row_start: np.ndarray
     px_tab: np.ndarray
     py_tab: np.ndarray
 
@@ -552,7 +653,7 @@ def _make_bins(cxy: np.ndarray, cfg: _Config) -> _Bins:
     radius = math.sqrt(distance_threshold(cfg.sigma, cfg.dist_eps))
     box = _face_boxes(cxy, radius, s)
     n_ty, n_tx = -(-s // TILE_H), -(-s // TILE_W)
-    tile_start, tile_entry, entry_face, face_start = _bin_faces(box, n_ty, n_tx)
+    tile_start, tile_entry, entry_face, face_start, row_start = _bin_faces(box, n_ty, n_tx)
     # every tile is rendered (empty ones get the background); busiest first, so
     # the dynamic schedule ends with small tiles and the threads finish together
     order = np.argsort(-np.diff(tile_start), kind="stable").astype(np.int64)
@@ -561,7 +662,7 @@ def _make_bins(cxy: np.ndarray, cfg: _Config) -> _Bins:
     k = np.arange(max(hp, wp + LANES), dtype=np.float64)
     px_tab = ((2 * k[:wp + LANES] + 1) / s - 1).astype(cxy.dtype)
     py_tab = (1 - (2 * k[:hp] + 1) / s).astype(cxy.dtype)
-    return _Bins(box, n_tx, wp, order, tile_start, tile_entry, entry_face, face_start, px_tab, py_tab)
+    return _Bins(box, n_tx, wp, order, tile_start, tile_entry, entry_face, face_start, row_start, px_tab, py_tab)
 
 
 def _numpy(t: "torch.Tensor") -> np.ndarray:
@@ -573,13 +674,14 @@ def _make_function():  # type: ignore[no-untyped-def]
     from torch.autograd.function import once_differentiable
 
     class SoftRasterizeNumba(torch.autograd.Function):
-        """Autograd wrapper of the kernels: (cxy, inv, iz, colors) -> (image, alpha)."""
+        """Autograd wrapper of the kernels: (projected vertices, colours) -> (image, alpha)."""
 
         @staticmethod
-        def forward(ctx, cxy, inv, iz, colors, cfg):  # type: ignore[no-untyped-def]
-            a_cxy, a_inv, a_iz, a_col = _numpy(cxy), _numpy(inv), _numpy(iz), _numpy(colors)
-            dtype = a_cxy.dtype
-            bins = _make_bins(a_cxy, cfg)
+        def forward(ctx, proj, colors, faces, cfg):  # type: ignore[no-untyped-def]
+            a_proj, a_col, a_faces = _numpy(proj), _numpy(colors), _numpy(faces)
+            dtype = a_proj.dtype
+            cxy, inv, iz, det = _face_setup(a_proj, a_faces, DET_EPS)
+            bins = _make_bins(cxy, cfg)
             s = cfg.size
             K = cfg.constants(dtype)
             image = np.empty((s, s, 3), dtype)
@@ -588,42 +690,42 @@ def _make_function():  # type: ignore[no-untyped-def]
             st_m = np.empty(n_state, dtype)
             st_s = np.empty(n_state, dtype)
             st_p = np.empty(n_state, dtype)
+            row_lo = np.empty(bins.row_start[-1], np.int32)
+            row_hi = np.empty(bins.row_start[-1], np.int32)
             _forward(
                 bins.order, bins.n_tx, s, bins.wp, bins.tile_start, bins.tile_entry, bins.entry_face,
-                bins.box, a_cxy, a_inv, a_iz, a_col, bins.px_tab, bins.py_tab, K,
-                image, alpha, st_m, st_s, st_p,
+                bins.row_start, bins.box, cxy, inv, iz, a_col, bins.px_tab, bins.py_tab, K,
+                image, alpha, st_m, st_s, st_p, row_lo, row_hi,
             )
             ctx.cfg = cfg
-            ctx.torch_dtype = cxy.dtype
-            ctx.arrays = (a_cxy, a_inv, a_iz, a_col, K, bins, image, st_m, st_s, st_p)
-            out_image, out_alpha = torch.from_numpy(image), torch.from_numpy(alpha)
-            return out_image, out_alpha
+            ctx.torch_dtype = proj.dtype
+            ctx.n_vertices = a_proj.shape[0]
+            ctx.arrays = (a_faces, cxy, inv, iz, det, a_col, K, bins, image, st_m, st_s, st_p, row_lo, row_hi)
+            return torch.from_numpy(image), torch.from_numpy(alpha)
 
         @staticmethod
         @once_differentiable
         def backward(ctx, g_image, g_alpha):  # type: ignore[no-untyped-def]
-            a_cxy, a_inv, a_iz, a_col, K, bins, image, st_m, st_s, st_p = ctx.arrays
+            a_faces, cxy, inv, iz, det, a_col, K, bins, image, st_m, st_s, st_p, row_lo, row_hi = ctx.arrays
             cfg = ctx.cfg
-            dtype = a_cxy.dtype
-            tdtype = cxy_dtype = ctx.torch_dtype
-            gi = np.zeros_like(image) if g_image is None else _numpy(g_image.to(tdtype))
-            ga = np.zeros(image.shape[:2], dtype) if g_alpha is None else _numpy(g_alpha.to(cxy_dtype))
+            dtype = cxy.dtype
+            gi = np.zeros_like(image) if g_image is None else _numpy(g_image.to(ctx.torch_dtype))
+            ga = np.zeros(image.shape[:2], dtype) if g_alpha is None else _numpy(g_alpha.to(ctx.torch_dtype))
             grad = np.empty((bins.tile_entry.shape[0], N_GRAD), dtype)
             _backward(
                 bins.order, bins.n_tx, cfg.size, bins.wp, bins.tile_start, bins.tile_entry, bins.entry_face,
-                bins.box, a_cxy, a_inv, a_iz, a_col, bins.px_tab, bins.py_tab, K,
-                image, gi, ga, st_m, st_s, st_p, grad,
+                bins.row_start, bins.box, cxy, inv, iz, a_col, bins.px_tab, bins.py_tab, K,
+                image, gi, ga, st_m, st_s, st_p, row_lo, row_hi, grad,
             )
-            face = np.empty((a_cxy.shape[0], N_GRAD), dtype)
-            _sum_entries(grad, bins.face_start, face)
-            face_t = torch.from_numpy(face)
-            return (
-                face_t[:, 0:6].contiguous(),
-                face_t[:, 6:15].contiguous(),
-                face_t[:, 15:18].contiguous(),
-                face_t[:, 18:21].contiguous(),
-                None,
-            )
+            n_faces = cxy.shape[0]
+            g_corner = np.empty((n_faces, 9), dtype)
+            g_col = np.empty((n_faces, 3), dtype)
+            _face_grads(grad, bins.face_start, cxy, inv, iz, det, DET_EPS, g_corner, g_col)
+            g_proj = None
+            if ctx.needs_input_grad[0]:
+                g_proj = torch.from_numpy(_scatter_vertices(g_corner, a_faces, ctx.n_vertices))
+            g_colors = torch.from_numpy(g_col) if ctx.needs_input_grad[1] else None
+            return g_proj, g_colors, None, None
 
     return SoftRasterizeNumba
 
@@ -636,30 +738,6 @@ def _function():  # type: ignore[no-untyped-def]
     if _FUNCTION is None:
         _FUNCTION = _make_function()
     return _FUNCTION
-
-
-def face_inputs(vertices: "torch.Tensor", faces: "torch.Tensor", camera: "Camera"):  # type: ignore[no-untyped-def]
-    """Per-face kernel inputs with autograd: corners (F, 6) NDC xy, SoftRas's
-    barycentric matrix (F, 9), inverse corner depths (F, 3) in 1/model units."""
-    import torch
-
-    proj = camera.project_torch(vertices)
-    fv = proj[faces]  # (F, 3, 3)
-    x0, x1, x2 = fv[:, 0, 0], fv[:, 1, 0], fv[:, 2, 0]
-    y0, y1, y2 = fv[:, 0, 1], fv[:, 1, 1], fv[:, 2, 1]
-    det = x2 * (y0 - y1) + x0 * (y1 - y2) + x1 * (y2 - y0)
-    det = torch.where(det > 0, det.clamp_min(DET_EPS), det.clamp_max(-DET_EPS))
-    inv = torch.stack(
-        [
-            y1 - y2, x2 - x1, x1 * y2 - x2 * y1,
-            y2 - y0, x0 - x2, x2 * y0 - x0 * y2,
-            y0 - y1, x1 - x0, x0 * y1 - x1 * y0,
-        ],
-        dim=1,
-    ) / det[:, None]
-    cxy = fv[..., :2].reshape(-1, 6)
-    iz = 1.0 / fv[..., 2]
-    return cxy, inv, iz
 
 
 def soft_rasterize_numba(
@@ -689,6 +767,6 @@ def soft_rasterize_numba(
     Returns:
         ``(image, alpha)``: shapes [S, S, 3] and [S, S], ``vertices.dtype``.
     """
-    cxy, inv, iz = face_inputs(vertices, faces, camera)
+    proj = camera.project_torch(vertices)  # autograd carries the kernels' gradient to the world
     cfg = _Config(camera.image_size, sigma, gamma, background, near, far, eps, dist_eps)
-    return _function().apply(cxy, inv, iz, face_colors, cfg)
+    return _function().apply(proj, face_colors, faces, cfg)

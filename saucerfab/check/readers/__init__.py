@@ -17,6 +17,7 @@ from pathlib import Path
 
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import MeshData, ReadError
+from saucerfab.check.readers.safe import Resources
 from saucerfab.check.report import finding
 
 #: file extension -> format name used in reports and printer profiles
@@ -102,45 +103,84 @@ def read_mesh(path: str | os.PathLike[str], limits: Limits) -> MeshData:
         if not data.startswith(b"#VRML"):
             raise ReadError("not_a_mesh", "a gzip file that does not hold VRML (only .wrz/.wrl.gz are read compressed)")
         fmt = "wrl"
-    if fmt == "stl":
+    if fmt == "3mf":  # a zip: a 3MF package, or a mesh with its side files zipped for upload
+        md = _read_zip(p, read_file_bounded(p, limits.max_file_bytes, "file"), limits)
+    elif fmt == "stl":
         from saucerfab.check.readers.stl import read_stl
 
         md = read_stl(p, head, size, limits)
     else:
-        if data is None:
-            data = read_file_bounded(p, limits.max_file_bytes, "file")
-        if fmt == "3mf":
-            from saucerfab.check.readers.threemf import read_3mf
-
-            md = read_3mf(data, limits)
-        elif fmt == "obj":
-            from saucerfab.check.readers.obj import read_obj
-
-            md = read_obj(p, data, limits)
-        elif fmt == "ply":
-            from saucerfab.check.readers.ply import read_ply
-
-            md = read_ply(p, data, limits)
-        elif fmt == "glb":
-            from saucerfab.check.readers.gltf import read_glb
-
-            md = read_glb(p, data, limits)
-        elif fmt == "gltf":
-            from saucerfab.check.readers.gltf import read_gltf
-
-            md = read_gltf(p, data, limits)
-        elif fmt == "wrl":
-            from saucerfab.check.readers.vrml import read_vrml
-
-            md = read_vrml(p, data, limits)
-        else:  # pragma: no cover - sniff only returns the names above
-            raise ReadError("unsupported_format", f"format {fmt!r} is not read")
-    md.format = fmt
-    if ext and ext != fmt and not (ext == "glb" and fmt == "gltf"):
+        md = _read_format(fmt, p, data if data is not None else read_file_bounded(p, limits.max_file_bytes, "file"),
+                          limits, None)
+    if ext and ext != md.format and not (ext == "glb" and md.format == "gltf") and not (ext == "3mf" and fmt == "3mf"):
         md.notes.insert(0, finding(
             "extension_mismatch",
-            f"the file is named .{ext} but holds {fmt.upper()}; rename it so printer software reads it right",
+            f"the file is named .{ext} but holds {md.format.upper()}"
+            + (" in a zip" if fmt == "3mf" else "") + "; rename it so printer software reads it right",
         ))
+    return md
+
+
+def _read_format(fmt: str, p: Path, data: bytes, limits: Limits, res: Resources | None) -> MeshData:
+    """Dispatch to the reader for ``fmt`` (not 3MF, which is an archive)."""
+    if fmt == "obj":
+        from saucerfab.check.readers.obj import read_obj
+
+        md = read_obj(p, data, limits, res)
+    elif fmt == "ply":
+        from saucerfab.check.readers.ply import read_ply
+
+        md = read_ply(p, data, limits, res)
+    elif fmt == "glb":
+        from saucerfab.check.readers.gltf import read_glb
+
+        md = read_glb(p, data, limits, res)
+    elif fmt == "gltf":
+        from saucerfab.check.readers.gltf import read_gltf
+
+        md = read_gltf(p, data, limits, res)
+    elif fmt == "wrl":
+        from saucerfab.check.readers.vrml import read_vrml
+
+        md = read_vrml(p, data, limits, res)
+    elif fmt == "stl":
+        from saucerfab.check.readers.stl import read_stl
+
+        md = read_stl(p, data[:4096], len(data), limits, data)
+    else:  # pragma: no cover - sniff only returns the names above
+        raise ReadError("unsupported_format", f"format {fmt!r} is not read")
+    md.format = fmt
+    return md
+
+
+def _read_zip(p: Path, data: bytes, limits: Limits) -> MeshData:
+    """A 3MF package; or one OBJ/PLY/VRML/glTF/STL with its textures zipped together (a bureau upload)."""
+    from saucerfab.check.readers.safe import SafeZip, ZipResources
+    from saucerfab.check.readers.threemf import has_model_part, read_3mf
+
+    zf = SafeZip(data, limits)
+    if has_model_part(zf):
+        md = read_3mf(zf, limits)
+        md.format = "3mf"
+        return md
+    meshes = [n for n in zf.entry_names()
+              if Path(n).suffix.lower() in EXTENSIONS and not n.startswith("__MACOSX/") and not n.endswith("/")]
+    if not meshes:
+        raise ReadError("not_a_mesh", "a zip archive with neither a 3MF model nor a mesh file")
+    if len(meshes) > 1:
+        raise ReadError("unsupported_format", f"the zip holds {len(meshes)} mesh files ({', '.join(meshes[:4])}); "
+                                              "check them one at a time")
+    entry = meshes[0]
+    inner = zf.read(entry, limits.max_file_bytes, "mesh entry")
+    if not inner:
+        raise ReadError("empty_file", f"the zip's {entry!r} is empty")
+    ext = EXTENSIONS[Path(entry).suffix.lower()]
+    fmt = sniff(inner[:4096], len(inner), ext)
+    if fmt in ("3mf", "gzip"):
+        raise ReadError("unsupported_format", f"{entry!r} in the zip is itself compressed; unpack it first")
+    md = _read_format(fmt, p, inner, limits, ZipResources(zf, entry, limits))
+    md.notes.append(finding("from_archive", f"{md.format.upper()} read from {entry!r} inside the zip, with its "
+                                            "material library and textures from beside it in the archive"))
     return md
 
 

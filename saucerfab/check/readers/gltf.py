@@ -24,7 +24,7 @@ import numpy as np
 
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
-from saucerfab.check.readers.safe import load_texture_file, probe_texture, read_file_bounded, resolve_beside
+from saucerfab.check.readers.safe import DiskResources, Resources, probe_texture
 
 _COMPONENT = {5120: "i1", 5121: "u1", 5122: "i2", 5123: "u2", 5125: "u4", 5126: "f4"}
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
@@ -64,10 +64,10 @@ def _item(seq: list[Any], i: int, what: str) -> dict[str, Any]:
 
 
 class _Gltf:
-    def __init__(self, doc: Any, buffers: list[bytes | None], base: Path, limits: Limits) -> None:
+    def __init__(self, doc: Any, buffers: list[bytes | None], res: Resources, limits: Limits) -> None:
         self.doc = _dict(doc, "the glTF document")
         self.buffers = buffers
-        self.base = base
+        self.res = res
         self.limits = limits
         self.b = MeshBuilder("glb", limits)
         self._buf_cache: dict[int, bytes] = {}
@@ -104,12 +104,7 @@ class _Gltf:
                 return base64.b64decode(payload, validate=True)
             except (binascii.Error, ValueError):
                 raise _bad(f"{what}: data URI is not valid base64") from None
-        p = resolve_beside(self.base, uri)
-        if p is None:
-            raise ReadError("archive_unsafe_path", f"glTF {what} uri {uri[:80]!r} is absolute or leaves the model's folder")
-        if not p.is_file():
-            raise ReadError("truncated", f"glTF {what} file {uri[:80]!r} is not there")
-        return read_file_bounded(p, cap, f"glTF {what}")
+        return self.res.read(uri, cap, f"glTF {what}")
 
     def view_bytes(self, i: int) -> memoryview:
         bv = _item(_list(self.doc, "bufferViews"), i, "bufferView")
@@ -217,6 +212,10 @@ class _Gltf:
             else:
                 idx = np.arange(len(V), dtype=np.int64)
             F = _triangles(idx, mode, what)
+            if F.size and (F.min() < 0 or F.max() >= len(V)):
+                bad = int(F.max()) if F.max() >= len(V) else int(F.min())
+                raise ReadError("index_out_of_range",
+                                f"{what}: index {bad} but the primitive has {len(V):,} positions")
             Vw = V @ M[:3, :3].T + M[:3, 3]
             if np.linalg.det(M[:3, :3]) < 0:
                 F = F[:, ::-1]  # mirrored instance: keep outward winding
@@ -276,7 +275,7 @@ class _Gltf:
                     return probe_texture(name, self._uri_bytes(uri, self.limits.max_texture_bytes, name), self.limits)
                 except ReadError as exc:
                     return TextureInfo(name=name, status="unreadable", message=exc.message)
-            return load_texture_file(self.base, uri, self.limits)
+            return self.res.texture(uri)
 
         return self.b.texture(f"image {si}", load)
 
@@ -326,8 +325,8 @@ def _triangles(idx: np.ndarray, mode: int, what: str) -> np.ndarray:
     return np.stack([np.full_like(k, idx[0]), idx[k + 1], idx[k + 2]], axis=1)  # fan
 
 
-def read_glb(path: Path, data: bytes, limits: Limits) -> MeshData:
-    """Read a binary glTF (GLB) file's bytes."""
+def read_glb(path: Path, data: bytes, limits: Limits, res: Resources | None = None) -> MeshData:
+    """Read a binary glTF (GLB) file's bytes (external files, if any, come from ``res``)."""
     if len(data) < 20:
         raise ReadError("truncated", f"the GLB is {len(data)} bytes; its header alone needs 20")
     magic, version, length = struct.unpack("<4sII", data[:12])
@@ -351,14 +350,14 @@ def read_glb(path: Path, data: bytes, limits: Limits) -> MeshData:
     if doc_bytes is None:
         raise _bad("the GLB has no JSON chunk")
     doc = _load_json(doc_bytes, limits)
-    g = _Gltf(doc, [binchunk], path.parent, limits)
+    g = _Gltf(doc, [binchunk], res or DiskResources(path.parent, limits), limits)
     return g.read()
 
 
-def read_gltf(path: Path, data: bytes, limits: Limits) -> MeshData:
-    """Read a JSON glTF file's bytes; its buffers and images are data URIs or files beside it."""
+def read_gltf(path: Path, data: bytes, limits: Limits, res: Resources | None = None) -> MeshData:
+    """Read a JSON glTF file's bytes; its buffers and images are data URIs or files from ``res``."""
     doc = _load_json(data, limits)
-    g = _Gltf(doc, [], path.parent, limits)
+    g = _Gltf(doc, [], res or DiskResources(path.parent, limits), limits)
     g.b.fmt = "gltf"
     md = g.read()
     return md

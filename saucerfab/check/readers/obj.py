@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from saucerfab.check.limits import Limits
-from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError
-from saucerfab.check.readers.safe import load_texture_file, resolve_beside
+from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
+from saucerfab.check.readers.safe import DiskResources, Resources
 
 _V = re.compile(rb"^[ \t]*v[ \t]+([^\r\n]*)", re.M)
 _VT = re.compile(rb"^[ \t]*vt[ \t]+([^\r\n]*)", re.M)
@@ -74,8 +74,9 @@ def _floats(payloads: list[bytes], what: str) -> tuple[np.ndarray, np.ndarray]:
         raise ReadError("malformed", f"an OBJ '{what}' line has something that is not a number") from None
 
 
-def read_obj(path: Path, data: bytes, limits: Limits) -> MeshData:
-    """Read an OBJ file's bytes; its MTL and textures are looked up beside ``path``."""
+def read_obj(path: Path, data: bytes, limits: Limits, res: Resources | None = None) -> MeshData:
+    """Read an OBJ file's bytes; its MTL and textures come from ``res`` (default: beside ``path``)."""
+    res = res or DiskResources(path.parent, limits)
     b = MeshBuilder("obj", limits)
     nv, nvt, nf = _count_lines(data, b"v"), _count_lines(data, b"vt"), _count_lines(data, b"f")
     b.reserve(nv, nf, "the OBJ")
@@ -114,13 +115,18 @@ def read_obj(path: Path, data: bytes, limits: Limits) -> MeshData:
             face_mat.append(cur)
     if not face_pay:
         raise ReadError("no_triangles", f"the OBJ has {len(V):,} vertices but no faces")
-    fv, ft, fmat = _faces(face_pay, np.array(face_mat, dtype=np.int64), len(V), len(UV), data)
+    fv, ft, fmat = _faces(face_pay, np.array(face_mat, dtype=np.int64), len(V), len(UV), data, limits)
     b.reserve(len(V), len(fv), "the OBJ")
     if len(fv) == 0:
         raise ReadError("no_triangles", "the OBJ's faces have fewer than 3 corners")
 
     # materials and textures
-    mats = _read_mtls(path, data, limits)
+    mats, failed = _read_mtls(data, res)
+    for ref, exc in failed:
+        # without its material library an OBJ prints uncoloured: as serious as a missing texture
+        status = "unsafe_path" if exc.code == "archive_unsafe_path" else "missing"
+        b.texture(f"<mtllib {ref}>", lambda: TextureInfo(name=f"{ref} (material library)", status=status,
+                                                         message=f"material library {ref!r}: {exc.message}"))
     m = len(fv)
     corner_uv = None
     face_tex = None
@@ -140,8 +146,7 @@ def read_obj(path: Path, data: bytes, limits: Limits) -> MeshData:
                     corner_uv = np.full((m, 3, 2), np.nan)
                     face_tex = np.full(m, -1, dtype=np.int32)
                 ref = mat.map_kd
-                base = path.parent
-                ti = b.texture(ref, lambda: load_texture_file(base, ref, limits))
+                ti = b.texture(ref, lambda: res.texture(ref))
                 corner_uv[has_uv] = UV[ft[has_uv]]
                 face_tex[has_uv] = ti  # type: ignore[index]
                 b.colour_kinds.add("texture")
@@ -154,30 +159,40 @@ def read_obj(path: Path, data: bytes, limits: Limits) -> MeshData:
 
 
 def _faces(
-    pay: list[bytes], mat: np.ndarray, nv: int, nvt: int, data: bytes
+    pay: list[bytes], mat: np.ndarray, nv: int, nvt: int, data: bytes, limits: Limits
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(triangles (m,3) vertex indices, (m,3) uv indices or -1, (m,) material) from 'f' payloads."""
+    """(triangles (m,3) vertex indices, (m,3) uv indices or -1, (m,) material) from 'f' payloads.
+
+    Bulk path: every face has the first face's corner count k (triangles,
+    quads...) and index form, and no index is negative; then k-gons are
+    fan-triangulated with numpy. Otherwise line by line.
+    """
     first = pay[0].split()
     form = None
     if first:
         t = first[0]
         form = "v//n" if b"//" in t else {0: "v", 1: "v/t", 2: "v/t/n"}.get(t.count(b"/"))
-    if form is not None:
+    k = len(first)
+    if form is not None and 3 <= k <= 16:
         tok = _FACE_FORMS[form]
-        pat = re.compile(rb"[ \t]*" + tok + rb"[ \t]+" + tok + rb"[ \t]+" + tok + rb"[ \t]*")
+        one = rb"[ \t]*" + rb"[ \t]+".join([tok] * k) + rb"[ \t]*"
         joined = b"\n".join(pay)
-        full = re.compile(rb"(?:" + pat.pattern + rb"\n)*" + pat.pattern)
-        if full.fullmatch(joined) is not None and b"-" not in joined:
-            k = {"v": 1, "v/t": 2, "v/t/n": 3, "v//n": 2}[form]
+        if b"-" not in joined and re.fullmatch(rb"(?:" + one + rb"\n)*" + one, joined) is not None:
+            per = {"v": 1, "v/t": 2, "v/t/n": 3, "v//n": 2}[form]
             nums = np.array(joined.replace(b"//", b" ").replace(b"/", b" ").split(), dtype=np.int64)
-            nums = nums.reshape(len(pay), 3, k)
-            fv = nums[:, :, 0] - 1
-            ft = nums[:, :, 1] - 1 if form in ("v/t", "v/t/n") else np.full((len(pay), 3), -1, dtype=np.int64)
+            nums = nums.reshape(len(pay), k, per)
+            j = np.arange(1, k - 1)
+            corners = np.stack([np.zeros_like(j), j, j + 1], axis=1)  # fan: (0, j, j+1)
+            fv = (nums[:, :, 0] - 1)[:, corners].reshape(-1, 3)
+            if form in ("v/t", "v/t/n"):
+                ft = (nums[:, :, 1] - 1)[:, corners].reshape(-1, 3)
+            else:
+                ft = np.full(fv.shape, -1, dtype=np.int64)
             _check_range(fv, nv, "vertex")
             if form in ("v/t", "v/t/n"):
                 _check_range(ft, nvt, "texture coordinate")
-            return fv, ft, mat
-    return _faces_slow(data, nv, nvt)
+            return fv, ft, np.repeat(mat, k - 2)
+    return _faces_slow(data, nv, nvt, limits)
 
 
 def _check_range(idx: np.ndarray, n: int, what: str) -> None:
@@ -194,8 +209,13 @@ def _check_range(idx: np.ndarray, n: int, what: str) -> None:
 _SEQ = re.compile(rb"^[ \t]*(v|vt|f|usemtl)[ \t]+([^\r\n]*)", re.M)
 
 
-def _faces_slow(data: bytes, nv_total: int, nvt_total: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sequential parse: polygons, negative (relative) indices, comments, mixed forms."""
+def _faces_slow(data: bytes, nv_total: int, nvt_total: int, limits: Limits
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sequential parse: mixed polygons, negative (relative) indices, comments, mixed forms.
+
+    Fan triangulation can turn one long line into many triangles, so the
+    triangle cap is checked as the list grows, not after.
+    """
     fv: list[tuple[int, int, int]] = []
     ft: list[tuple[int, int, int]] = []
     fmat: list[int] = []
@@ -238,6 +258,9 @@ def _faces_slow(data: bytes, nv_total: int, nvt_total: int) -> tuple[np.ndarray,
             ft.append((ti[0], ti[k], ti[k + 1]))
             fmat.append(cur)
         nface += 1
+        if len(fv) > limits.max_triangles:
+            raise ReadError("over_check_limit", f"the OBJ's polygons make over {limits.max_triangles:,} triangles "
+                                                "(Limits.max_triangles; --max-triangles raises it)")
     fva = np.array(fv, dtype=np.int64).reshape(-1, 3)
     fta = np.array(ft, dtype=np.int64).reshape(-1, 3)
     _check_range(fva, nv_total, "vertex")
@@ -248,20 +271,16 @@ def _faces_slow(data: bytes, nv_total: int, nvt_total: int) -> tuple[np.ndarray,
     return fva, fta, np.array(fmat, dtype=np.int64)
 
 
-def _read_mtls(path: Path, data: bytes, limits: Limits) -> dict[str, _Material]:
-    """Materials from every ``mtllib``, read only from beside the OBJ."""
+def _read_mtls(data: bytes, res: Resources) -> tuple[dict[str, _Material], list[tuple[str, ReadError]]]:
+    """Materials from every ``mtllib`` (read only from beside the OBJ), and the libraries that failed."""
     mats: dict[str, _Material] = {}
+    failed: list[tuple[str, ReadError]] = []
     for raw in _MTLLIB.findall(data)[:16]:
         ref = raw.decode("utf-8", "replace").strip()
-        p = resolve_beside(path.parent, ref)
-        if p is None or not p.is_file():
-            # several names on one line, or a missing library: the texture check reports what is missing
-            continue
         try:
-            if p.stat().st_size > MAX_MTL_BYTES:
-                continue
-            text = p.read_bytes().decode("utf-8", "replace")
-        except OSError:
+            text = res.read(ref, MAX_MTL_BYTES, "material library").decode("utf-8", "replace")
+        except ReadError as exc:
+            failed.append((ref, exc))
             continue
         cur: _Material | None = None
         for line in text.splitlines():
@@ -275,4 +294,4 @@ def _read_mtls(path: Path, data: bytes, limits: Limits) -> dict[str, _Material]:
                 cur.kd = True
             elif cur is not None and key == "map_kd" and len(tok) > 1:
                 cur.map_kd = tok[-1]  # options (-s, -o...) come first; the file name last
-    return mats
+    return mats, failed

@@ -22,7 +22,7 @@ import numpy as np
 
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
-from saucerfab.check.readers.safe import load_texture_file
+from saucerfab.check.readers.safe import DiskResources, Resources
 
 _TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
@@ -94,8 +94,9 @@ def _header(data: bytes) -> tuple[str, list[_Element], list[str], int]:
     return fmt, elements, comments, nl + 1
 
 
-def read_ply(path: Path, data: bytes, limits: Limits) -> MeshData:
-    """Read a PLY file's bytes (a texture is looked up beside ``path``)."""
+def read_ply(path: Path, data: bytes, limits: Limits, res: Resources | None = None) -> MeshData:
+    """Read a PLY file's bytes (a texture comes from ``res``, default: beside ``path``)."""
+    res = res or DiskResources(path.parent, limits)
     fmt, elements, comments, start = _header(data)
     body = memoryview(data)[start:]
     b = MeshBuilder("ply", limits)
@@ -120,7 +121,7 @@ def read_ply(path: Path, data: bytes, limits: Limits) -> MeshData:
         elif e.name == "face":
             b.reserve(0, e.count, "the PLY face element")
     parsed = _read_ascii(bytes(body), elements) if fmt == "ascii" else _read_binary(body, elements, fmt)
-    return _assemble(path, parsed, elements, comments, b, limits)
+    return _assemble(res, parsed, elements, comments, b)
 
 
 def _read_binary(body: memoryview, elements: list[_Element], fmt: str) -> dict[str, dict[str, np.ndarray | list]]:
@@ -268,8 +269,8 @@ def _ascii_element(rows: list[bytes], e: _Element) -> dict[str, np.ndarray | lis
 
 
 def _assemble(
-    path: Path, parsed: dict[str, dict[str, np.ndarray | list]], elements: list[_Element],
-    comments: list[str], b: MeshBuilder, limits: Limits,
+    res: Resources, parsed: dict[str, dict[str, np.ndarray | list]], elements: list[_Element],
+    comments: list[str], b: MeshBuilder,
 ) -> MeshData:
     vert = parsed["vertex"]
     face = parsed["face"]
@@ -305,7 +306,7 @@ def _assemble(
                 name="(none named)", status="missing",
                 message="the PLY has texture coordinates but names no texture ('comment TextureFile name.png')"))
         else:
-            ti = b.texture(ref, lambda: load_texture_file(path.parent, ref, limits))
+            ti = b.texture(ref, lambda: res.texture(ref))
         face_tex = np.full(m, ti, dtype=np.int32)
         b.colour_kinds.add("texture")
     if all(c in vert for c in ("red", "green", "blue")):

@@ -21,6 +21,7 @@ import posixpath
 import struct
 import warnings
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -98,7 +99,7 @@ class SafeZip:
             infos = self.zf.infolist()
         except zipfile.BadZipFile as exc:
             raise ReadError("malformed", f"not a valid zip archive: {exc}") from None
-        except (OSError, EOFError, ValueError, NotImplementedError, struct.error) as exc:
+        except (OSError, EOFError, ValueError, NotImplementedError, struct.error, zlib.error) as exc:
             raise ReadError("truncated", f"the zip archive is damaged: {exc}") from None
         if len(infos) > limits.max_zip_entries:
             raise ReadError(
@@ -185,7 +186,7 @@ class SafeZip:
             raise ReadError("unsupported_format", f"{what} {info.filename!r}: {exc}") from None
         except NotImplementedError as exc:
             raise ReadError("unsupported_format", f"{what} {info.filename!r}: {exc}") from None
-        except (zipfile.BadZipFile, OSError, EOFError, ValueError, struct.error) as exc:
+        except (zipfile.BadZipFile, OSError, EOFError, ValueError, struct.error, zlib.error) as exc:
             raise ReadError("truncated", f"{what} {info.filename!r} is damaged: {exc}") from None
         self.budget -= len(out)
         return bytes(out)
@@ -217,6 +218,32 @@ def parse_xml(data: bytes, what: str, limit: int) -> Any:
 # -- images -----------------------------------------------------------------
 
 
+def header_size(data: bytes) -> tuple[str, int, int] | None:
+    """(format, width, height) read from a PNG or JPEG header without Pillow, or None.
+
+    Pillow refuses to even open an image over twice its global pixel limit,
+    and the report should still say how large the bomb claimed to be.
+    """
+    if data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) >= 24 and data[12:16] == b"IHDR":
+        w, h = struct.unpack(">II", data[16:24])
+        return "PNG", int(w), int(h)
+    if data[:3] == b"\xff\xd8\xff":
+        i = 2
+        while i + 9 < len(data) and i < 1 << 20:  # markers until the frame header
+            if data[i] != 0xFF:
+                return None
+            marker = data[i + 1]
+            if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
+                i += 2
+                continue
+            (seg,) = struct.unpack(">H", data[i + 2 : i + 4])
+            if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+                h, w = struct.unpack(">HH", data[i + 5 : i + 9])
+                return "JPEG", int(w), int(h)
+            i += 2 + seg
+    return None
+
+
 def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool = True) -> TextureInfo:
     """Check a texture safely: size in bytes, then pixels from the header, then decode.
 
@@ -232,6 +259,16 @@ def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool
         info.status = "too_large"
         info.message = f"texture {name!r} is {len(data):,} bytes, over the checker's limit of {limits.max_texture_bytes:,}"
         return info
+    head = header_size(data)
+    if head is not None:
+        info.image_format, info.width, info.height = head
+        if head[1] * head[2] > limits.max_texture_pixels:
+            info.status = "too_large"
+            info.message = (
+                f"texture {name!r} is {head[1]:,} x {head[2]:,} pixels by its header, over the checker's limit of "
+                f"{limits.max_texture_pixels:,} pixels (decompression bomb?); not decoded"
+            )
+            return info
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # DecompressionBombWarning: we check pixels ourselves below
@@ -255,7 +292,8 @@ def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool
     except UnidentifiedImageError:
         info.status = "unreadable"
         info.message = f"texture {name!r} is not an image in a format printers take ({', '.join(TEXTURE_FORMATS)})"
-    except (OSError, SyntaxError, ValueError, EOFError, MemoryError, struct.error, IndexError, TypeError) as exc:
+    except (OSError, SyntaxError, ValueError, EOFError, MemoryError, struct.error, IndexError, TypeError,
+            zlib.error) as exc:
         info.status, info.message = "unreadable", f"texture {name!r} cannot be decoded: {exc}"
     return info
 
@@ -300,3 +338,72 @@ def zip_join(base: str, ref: str) -> str | None:
             return None  # escaping or not, '..' in a package reference is not something 3MF writers emit
         parts.append(part)
     return "/".join(parts) if parts else None
+
+
+# -- resources a model file names (textures, material libraries, buffers) -------------
+
+
+class Resources:
+    """Where a model file's references resolve: its folder on disk, or its folder inside an archive.
+
+    Readers ask for textures and side files by the name the model gives;
+    every lookup is confined (no absolute paths, no ``..``) and bounded.
+    """
+
+    def texture(self, ref: str) -> TextureInfo:
+        """The texture named ``ref``, checked (never raises)."""
+        raise NotImplementedError
+
+    def read(self, ref: str, cap: int, what: str) -> bytes:
+        """The bytes of side file ``ref`` (at most ``cap``); raises ReadError if unsafe, missing or too big."""
+        raise NotImplementedError
+
+
+class DiskResources(Resources):
+    """References resolved in the model file's folder."""
+
+    def __init__(self, base_dir: Path, limits: Limits) -> None:
+        self.base = base_dir
+        self.limits = limits
+
+    def texture(self, ref: str) -> TextureInfo:
+        return load_texture_file(self.base, ref, self.limits)
+
+    def read(self, ref: str, cap: int, what: str) -> bytes:
+        p = resolve_beside(self.base, ref)
+        if p is None:
+            raise ReadError("archive_unsafe_path", f"{what} {ref[:80]!r} is absolute or leaves the model's folder")
+        if not p.is_file():
+            raise ReadError("truncated", f"{what} {ref[:80]!r} is not there")
+        return read_file_bounded(p, cap, what)
+
+
+class ZipResources(Resources):
+    """References resolved beside an entry inside an archive (a zipped OBJ + MTL + PNG)."""
+
+    def __init__(self, zf: SafeZip, entry: str, limits: Limits) -> None:
+        self.zf = zf
+        self.entry = entry
+        self.limits = limits
+
+    def texture(self, ref: str) -> TextureInfo:
+        target = zip_join(self.entry, ref)
+        if target is None or is_unsafe_relpath(ref.lstrip("/")):
+            return TextureInfo(name=ref, status="unsafe_path",
+                               message=f"texture path {ref!r} is absolute or leaves the archive folder; not read")
+        if not self.zf.has(target):
+            return TextureInfo(name=ref, status="missing", message=f"texture {ref!r} is not in the archive")
+        try:
+            data = self.zf.read(target, self.limits.max_texture_bytes, "texture")
+        except ReadError as exc:
+            return TextureInfo(name=ref, status="too_large" if exc.code == "archive_too_large" else "unreadable",
+                               message=exc.message)
+        return probe_texture(ref, data, self.limits)
+
+    def read(self, ref: str, cap: int, what: str) -> bytes:
+        target = zip_join(self.entry, ref)
+        if target is None or is_unsafe_relpath(ref.lstrip("/")):
+            raise ReadError("archive_unsafe_path", f"{what} {ref[:80]!r} leaves the archive folder")
+        if not self.zf.has(target):
+            raise ReadError("truncated", f"{what} {ref[:80]!r} is not in the archive")
+        return self.zf.read(target, cap, what)

@@ -37,8 +37,8 @@ def looks_binary(head: bytes, size: int) -> bool:
     return n is not None and size == 84 + 50 * n
 
 
-def read_stl(path: Path, head: bytes, size: int, limits: Limits) -> MeshData:
-    """Read an STL file (binary when its size matches its count, else ASCII)."""
+def read_stl(path: Path, head: bytes, size: int, limits: Limits, data: bytes | None = None) -> MeshData:
+    """Read an STL file (binary when its size matches its count, else ASCII); ``data``: its bytes if in memory."""
     b = MeshBuilder("stl", limits)
     n = binary_count(head)
     ascii_like = head.lstrip()[:5].lower() == b"solid" and b"facet" in head.lower()
@@ -51,9 +51,12 @@ def read_stl(path: Path, head: bytes, size: int, limits: Limits) -> MeshData:
                 f"binary STL header states {n:,} triangles ({need:,} bytes) but the file has {size:,} bytes",
             )
         b.reserve(3 * n, n, "the STL")
-        with open(path, "rb") as fh:
-            fh.seek(84)
-            body = fh.read(50 * n)
+        if data is not None:
+            body = data[84 : 84 + 50 * n]
+        else:
+            with open(path, "rb") as fh:
+                fh.seek(84)
+                body = fh.read(50 * n)
         if len(body) < 50 * n:
             raise ReadError("truncated", "the STL ended while it was being read")
         if size > need:
@@ -62,7 +65,8 @@ def read_stl(path: Path, head: bytes, size: int, limits: Limits) -> MeshData:
         V = recs["v"].reshape(-1, 3).astype(np.float64)
         b.add(V, np.arange(3 * n, dtype=np.int64).reshape(-1, 3), what="STL")
         return b.build(units="millimeter (assumed; STL has no units)")
-    data = read_file_bounded(path, limits.max_file_bytes, "STL file")
+    if data is None:
+        data = read_file_bounded(path, limits.max_file_bytes, "STL file")
     return _read_ascii(data, b, limits)
 
 

@@ -52,33 +52,68 @@ _P = "{%s}" % NS_PROD
 # -- fast path ----------------------------------------------------------------
 
 _WS = rb"[ \t\r\n]"
-_NUM = rb"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?"
-_INT = rb"[0-9]{1,10}"
-_VERT_BLOCK = re.compile(
-    rb"(?:" + _WS + rb"*<vertex" + _WS + rb'+x="' + _NUM + rb'"' + _WS + rb'+y="' + _NUM + rb'"'
-    + _WS + rb'+z="' + _NUM + rb'"' + _WS + rb"*/>)*" + _WS + rb"*"
-)
-_FIRST_TRI = re.compile(rb"<triangle((?:" + _WS + rb'+[a-z0-9]+="[^"<>]*")+)' + _WS + rb"*/>")
+_NAME = rb"([A-Za-z][A-Za-z0-9]*)="
 _TRI_ATTR_ORDER = (b"v1", b"v2", b"v3", b"pid", b"p1", b"p2", b"p3")
-_BLOCK_START = re.compile(rb"<(vertices|triangles)>|<([A-Za-z_][A-Za-z0-9_.-]*:)?texture2dgroup(" + _WS + rb'[^<>]*)?(?<!/)>')
-_TRI_BLOCK_CACHE: dict[tuple[bytes, ...], re.Pattern[bytes]] = {}
+_BLOCK_START = re.compile(
+    rb"<(vertices|triangles)>|<([A-Za-z_][A-Za-z0-9_.-]*:)?texture2dgroup(" + _WS + rb'[^<>]*)?(?<!/)>'
+)
+_ATTR = re.compile(_WS + rb"+" + _NAME)
+_END = re.compile(_WS + rb"*/>" + _WS + rb"*")
+_ELEMENT_RES: dict[bytes, tuple[re.Pattern[bytes], re.Pattern[bytes]]] = {}
 
 
-def _tri_block_re(names: tuple[bytes, ...]) -> re.Pattern[bytes]:
-    pat = _TRI_BLOCK_CACHE.get(names)
-    if pat is None:
-        attrs = b"".join(_WS + rb"+" + n + rb'="' + _INT + rb'"' for n in names)
-        pat = re.compile(rb"(?:" + _WS + rb"*<triangle" + attrs + _WS + rb"*/>)*" + _WS + rb"*")
-        _TRI_BLOCK_CACHE[names] = pat
-    return pat
+def _element_res(tag: bytes) -> tuple[re.Pattern[bytes], re.Pattern[bytes]]:
+    """(first element's opening up to its first attribute name, the same after a previous element's '/>')."""
+    res = _ELEMENT_RES.get(tag)
+    if res is None:
+        t = re.escape(tag)
+        res = (re.compile(_WS + rb"*<" + t + _WS + rb"+" + _NAME),
+               re.compile(_WS + rb"*/>" + _WS + rb"*<" + t + _WS + rb"+" + _NAME))
+        _ELEMENT_RES[tag] = res
+    return res
 
 
-def _tex2coord_re(prefix: bytes) -> re.Pattern[bytes]:
-    p = re.escape(prefix)
-    return re.compile(
-        rb"(?:" + _WS + rb"*<" + p + rb"tex2coord" + _WS + rb'+u="' + _NUM + rb'"' + _WS + rb'+v="' + _NUM + rb'"'
-        + _WS + rb"*/>)*" + _WS + rb"*"
-    )
+def _split_elements(content: bytes, tag: bytes) -> tuple[list[bytes], list[bytes]] | None:
+    """Attribute values and names of a block made only of ``<tag a="..." b="..."/>`` elements.
+
+    Every element must carry the same attributes in the same order, with
+    double quotes and XML whitespace; then splitting at the quotes gives
+    separators and values, and the separators take only a handful of
+    distinct forms, each checked against the grammar once. Anything else
+    (comments, CDATA, entities, other elements, varying attributes) returns
+    None and the block is left to the XML parser.
+    """
+    parts = content.split(b'"')
+    if len(parts) % 2 == 0:
+        return None
+    seps, vals = parts[0::2], parts[1::2]
+    if not vals:
+        return ([], []) if not content.strip(b" \t\r\n") else None
+    first_re, next_re = _element_res(tag)
+    m = first_re.fullmatch(seps[0])
+    if m is None:
+        return None
+    names = [m.group(1)]
+    k = 1
+    while k < len(seps) - 1:
+        a = _ATTR.fullmatch(seps[k])
+        if a is None:
+            break
+        names.append(a.group(1))
+        k += 1
+    n = len(vals) // k
+    if n * k != len(vals) or len(set(names)) != k or _END.fullmatch(seps[-1]) is None:
+        return None
+    for sep in set(seps[k : n * k : k]):
+        m = next_re.fullmatch(sep)
+        if m is None or m.group(1) != names[0]:
+            return None
+    for j in range(1, k):
+        for sep in set(seps[j : n * k : k]):
+            a = _ATTR.fullmatch(sep)
+            if a is None or a.group(1) != names[j]:
+                return None
+    return vals, names
 
 
 @dataclass
@@ -139,30 +174,35 @@ def _fast_blocks(data: bytes, marker_ns: str, limits: Limits) -> tuple[bytes, li
 
 
 def _parse_block(kind: str, content: bytes, prefix: bytes) -> Any:
-    if b"&" in content:
+    """The numbers of one bulk block, or None to leave it to the XML parser."""
+    if b"&" in content or b"<!" in content or b"<?" in content:
         return None
-    if kind == "vertices":
-        if _VERT_BLOCK.fullmatch(content) is None:
+    tag = {"vertices": b"vertex", "triangles": b"triangle", "tex2coord": prefix + b"tex2coord"}[kind]
+    split = _split_elements(content, tag)
+    if split is None:
+        return None
+    vals, names = split
+    try:
+        if kind == "vertices":
+            if sorted(names) != [b"x", b"y", b"z"] and names:
+                return None
+            arr = np.array(vals, dtype=np.float64).reshape(-1, 3)
+            return arr[:, [names.index(c) for c in (b"x", b"y", b"z")]] if names else arr
+        if kind == "tex2coord":
+            if sorted(names) != [b"u", b"v"] and names:
+                return None
+            arr = np.array(vals, dtype=np.float64).reshape(-1, 2)
+            return arr[:, [names.index(c) for c in (b"u", b"v")]] if names else arr
+        if names and (not set(names) <= set(_TRI_ATTR_ORDER) or not {b"v1", b"v2", b"v3"} <= set(names)):
             return None
-        vals = content.split(b'"')[1::2]
-        return np.array(vals, dtype=np.float64).reshape(-1, 3)
-    if kind == "tex2coord":
-        if _tex2coord_re(prefix).fullmatch(content) is None:
-            return None
-        vals = content.split(b'"')[1::2]
-        return np.array(vals, dtype=np.float64).reshape(-1, 2)
-    # triangles: the attribute set of the first element, in canonical order, for all
-    first = _FIRST_TRI.search(content)
-    if first is None:
-        return None if content.strip() else (np.zeros((0, 7), dtype=np.int64), _TRI_ATTR_ORDER[:3])
-    names = tuple(re.findall(rb"([a-z0-9]+)=", first.group(1)))
-    it = iter(_TRI_ATTR_ORDER)
-    if names[:3] != _TRI_ATTR_ORDER[:3] or not all(n in it for n in names):  # subsequence, in order
+        if any(c not in b"0123456789" for v in vals[:1] for c in v):
+            return None  # integers only (no sign, no spaces); checked on one value, numpy checks the rest
+        arr = np.array(vals, dtype=np.int64).reshape(-1, max(len(names), 1))
+    except (ValueError, OverflowError):
+        return None  # not plain numbers: the XML path reports it properly
+    if arr.size and arr.min() < 0:
         return None
-    if _tri_block_re(names).fullmatch(content) is None:
-        return None
-    vals = np.array(content.split(b'"')[1::2], dtype=np.int64).reshape(-1, len(names))
-    return vals, names
+    return arr, tuple(names)
 
 
 # -- model structure ------------------------------------------------------------
@@ -225,7 +265,8 @@ class _Reader:
         self.parts: dict[str, _Part] = {}
         self.b = MeshBuilder("3mf", limits)
         self.marker_ns = "urn:saucerfab:check:block:" + secrets.token_hex(8)
-        self.instanced_faces = 0
+        self._comp_cache: dict[tuple[str, int], list[tuple[_Part, int, np.ndarray]]] = {}
+        self._cost_cache: dict[tuple[str, int], tuple[int, int, int]] = {}
 
     # ---- parts
     def part(self, name: str) -> _Part:
@@ -336,6 +377,59 @@ class _Reader:
         return V, faces, props
 
     # ---- instancing
+    def _components(self, p: _Part, oid: int, obj: Any) -> list[tuple[_Part, int, np.ndarray]]:
+        """(part, object id, transform) of each component of ``obj``, parsed once."""
+        key = (p.name.lower(), oid)
+        if key in self._comp_cache:
+            return self._comp_cache[key]
+        out: list[tuple[_Part, int, np.ndarray]] = []
+        comps = obj.find(_C + "components")
+        for c in [] if comps is None else comps:
+            if c.tag != _C + "component":
+                continue
+            cid = _int_attr(c, "objectid", f"component of object {oid}")
+            if cid is None:
+                raise ReadError("malformed", f"a component of object {oid} has no objectid")
+            sub = p
+            path = c.get(_P + "path")
+            if path:
+                target = zip_join("/", path)
+                if target is None:
+                    raise ReadError("archive_unsafe_path", f"component path {path!r} escapes the archive")
+                sub = self.part(target)
+            out.append((sub, cid, _transform(c.get("transform"), f"component of object {oid}")))
+        self._comp_cache[key] = out
+        return out
+
+    def cost(self, p: _Part, oid: int, stack: tuple[tuple[str, int], ...] = ()) -> tuple[int, int, int]:
+        """(triangles, vertices, mesh parts) instancing ``oid`` would make, without making them.
+
+        Memoised per object, so a hierarchy that fans out to 10^12 triangles
+        is priced in a few steps and refused before any array exists.
+        """
+        key = (p.name.lower(), oid)
+        if key in self._cost_cache:
+            return self._cost_cache[key]
+        if key in stack:
+            raise ReadError("over_check_limit", f"3MF components form a cycle through object {oid}")
+        if len(stack) > self.limits.max_nesting:
+            raise ReadError("over_check_limit", f"3MF components nest deeper than {self.limits.max_nesting}")
+        obj = p.objects.get(oid)
+        if obj is None:
+            raise ReadError("malformed", f"3MF refers to object {oid}, which {p.name} does not define")
+        if obj.get("type", "model") == "other":
+            total = (0, 0, 0)
+        elif oid in p.meshes:
+            V, F, _ = p.meshes[oid]
+            total = (len(F), len(V), 1)
+        else:
+            total = (0, 0, 0)
+            for sub, cid, _ in self._components(p, oid, obj):
+                t = self.cost(sub, cid, stack + (key,))
+                total = (total[0] + t[0], total[1] + t[1], total[2] + t[2])
+        self._cost_cache[key] = total
+        return total
+
     def instance(self, p: _Part, oid: int, M: np.ndarray, depth: int) -> None:
         if depth > self.limits.max_nesting:
             raise ReadError("over_check_limit", f"3MF components nest deeper than {self.limits.max_nesting} (a cycle?)")
@@ -351,24 +445,11 @@ class _Reader:
             self.b.reserve(len(V), len(F), f"object {oid}")
             self._emit(p, oid, obj, V, F, props, M)
             return
-        comps = obj.find(_C + "components")
-        if comps is None:
+        comps = self._components(p, oid, obj)
+        if not comps:
             self.b.note("ignored_content", f"3MF object {oid} has neither a mesh nor components (skipped)")
-            return
-        for c in comps:
-            if c.tag != _C + "component":
-                continue
-            cid = _int_attr(c, "objectid", f"component of object {oid}")
-            if cid is None:
-                raise ReadError("malformed", f"a component of object {oid} has no objectid")
-            sub = p
-            path = c.get(_P + "path")
-            if path:
-                target = zip_join("/", path)
-                if target is None:
-                    raise ReadError("archive_unsafe_path", f"component path {path!r} escapes the archive")
-                sub = self.part(target)
-            self.instance(sub, cid, M @ _transform(c.get("transform"), f"component of object {oid}"), depth + 1)
+        for sub, cid, T in comps:
+            self.instance(sub, cid, M @ T, depth + 1)
 
     def _emit(self, p: _Part, oid: int, obj: Any, V: np.ndarray, F: np.ndarray, props: np.ndarray | None, M: np.ndarray) -> None:
         A, t = M[:3, :3], M[:3, 3]
@@ -461,9 +542,14 @@ def _start_part(zf: SafeZip, limits: Limits) -> str:
     raise ReadError("malformed", "the archive has no 3MF model part (is it a 3MF at all?)")
 
 
-def read_3mf(data: bytes, limits: Limits) -> MeshData:
-    """Read a 3MF package from its bytes."""
-    zf = SafeZip(data, limits)
+def has_model_part(zf: SafeZip) -> bool:
+    """Whether an archive is a 3MF package (a relationship to a model part, or a ``.model`` entry)."""
+    return zf.has("_rels/.rels") or any(n.lower().endswith(".model") for n in zf.entry_names())
+
+
+def read_3mf(data: bytes | SafeZip, limits: Limits) -> MeshData:
+    """Read a 3MF package from its bytes (or an already opened archive)."""
+    zf = data if isinstance(data, SafeZip) else SafeZip(data, limits)
     r = _Reader(zf, limits)
     root = r.part(_start_part(zf, limits))
     unit = root.unit
@@ -471,6 +557,8 @@ def read_3mf(data: bytes, limits: Limits) -> MeshData:
         raise ReadError("malformed", f"3MF unit {unit[:40]!r} is not one of {sorted(UNITS_MM)}")
     if not root.items:
         raise ReadError("no_triangles", "the 3MF build has no items: nothing would be printed")
+    items = []
+    tri = vert = parts = 0
     for oid, M, path in root.items:
         p = root
         if path:
@@ -478,5 +566,16 @@ def read_3mf(data: bytes, limits: Limits) -> MeshData:
             if target is None:
                 raise ReadError("archive_unsafe_path", f"build item path {path!r} escapes the archive")
             p = r.part(target)
+        t, v, n = r.cost(p, oid)
+        tri, vert, parts = tri + t, vert + v, parts + n
+        items.append((p, oid, M))
+    if tri > limits.max_triangles or vert > limits.max_vertices or parts > limits.max_parts:
+        raise ReadError(
+            "over_check_limit",
+            f"the 3MF build instances {tri:,} triangles in {parts:,} mesh parts, over the checker's limits "
+            f"({limits.max_triangles:,} triangles, Limits.max_triangles / --max-triangles; "
+            f"{limits.max_parts:,} parts, Limits.max_parts)",
+        )
+    for p, oid, M in items:
         r.instance(p, oid, M, 0)
     return r.b.build(unit_mm=UNITS_MM[unit], units=unit, units_stated=True)

@@ -26,7 +26,7 @@ import numpy as np
 
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
-from saucerfab.check.readers.safe import load_texture_file
+from saucerfab.check.readers.safe import DiskResources, Resources
 
 _TOKEN = re.compile(r'[ \t\r\n,]+|#[^\n\r]*|"(?:[^"\\]|\\.)*"|[{}\[\]]|[^ \t\r\n,{}\[\]"#]+')
 _NUMERIC_ARRAY = re.compile(r"[0-9eE.+\- \t\r\n,]*")
@@ -283,11 +283,46 @@ def _transform_matrix(n: Node) -> np.ndarray:
 
 
 class _Walker:
-    def __init__(self, path: Path, limits: Limits) -> None:
-        self.path = path
+    def __init__(self, res: Resources, limits: Limits) -> None:
+        self.res = res
         self.limits = limits
         self.b = MeshBuilder("wrl", limits)
         self.visits = 0
+
+    def cost(self, node: Any, memo: dict[int, tuple[int, int]], depth: int = 0) -> tuple[int, int]:
+        """(triangles, shapes) walking ``node`` would instance; memoised per node, so USE fan-outs are cheap."""
+        if not isinstance(node, Node):
+            return (0, 0)
+        key = id(node)
+        if key in memo:
+            return memo[key]
+        if depth > self.limits.max_nesting:
+            raise ReadError("over_check_limit", "VRML scene graph nests too deeply (Limits.max_nesting)")
+        t = node.type
+        total = (0, 0)
+        if t == "Shape":
+            geo = node.fields.get("geometry")
+            if isinstance(geo, Node) and geo.type == "IndexedFaceSet":
+                ci = geo.fields.get("coordIndex")
+                n = len(ci) if isinstance(ci, (list, np.ndarray)) else 0
+                minus = int(np.count_nonzero(np.asarray(ci) == -1)) if n else 0
+                total = (max(0, n - 3 * minus), 1)
+        else:
+            kids: list[Any] = []
+            if t in _GROUPS:
+                kids = _children(node.fields.get("children"))
+            elif t == "Switch":
+                choice = _children(node.fields.get("choice"))
+                w = _nums(node.fields.get("whichChoice", [-1]), "whichChoice")
+                i = int(w[0]) if len(w) else -1
+                kids = [choice[i]] if 0 <= i < len(choice) else []
+            elif t == "LOD":
+                kids = _children(node.fields.get("level"))[:1]
+            for c in kids:
+                a, b = self.cost(c, memo, depth + 1)
+                total = (total[0] + a, total[1] + b)
+        memo[key] = total
+        return total
 
     def walk(self, node: Any, M: np.ndarray, depth: int) -> None:
         if not isinstance(node, Node):
@@ -398,7 +433,7 @@ class _Walker:
         if re.match(r"^[A-Za-z][A-Za-z0-9+.-]*://", ref):
             return self.b.texture(ref, lambda: TextureInfo(
                 name=ref, status="unsafe_path", message=f"texture url {ref[:80]!r} is remote; the checker does not fetch it"))
-        return self.b.texture(ref, lambda: load_texture_file(self.path.parent, ref, self.limits))
+        return self.b.texture(ref, lambda: self.res.texture(ref))
 
 
 def _bool(v: Any, default: bool) -> bool:
@@ -445,8 +480,8 @@ def _polygons(ci: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:
     return ci[pos], pos
 
 
-def read_vrml(path: Path, data: bytes, limits: Limits) -> MeshData:
-    """Read a VRML 2.0 file's bytes (textures are looked up beside ``path``)."""
+def read_vrml(path: Path, data: bytes, limits: Limits, res: Resources | None = None) -> MeshData:
+    """Read a VRML 2.0 file's bytes (textures come from ``res``, default: beside ``path``)."""
     first = data[:64]
     if not first.startswith(b"#VRML V2.0"):
         if first.startswith(b"#VRML V1.0"):
@@ -455,9 +490,20 @@ def read_vrml(path: Path, data: bytes, limits: Limits) -> MeshData:
     text = data.decode("utf-8", "replace")
     p = _Parser(text, limits)
     roots = p.scene()
-    w = _Walker(path, limits)
+    w = _Walker(res or DiskResources(path.parent, limits), limits)
     if p.protos:
         w.b.note("ignored_content", "VRML PROTO definitions were skipped; their instances are not checked")
+    memo: dict[int, tuple[int, int]] = {}
+    tri = shapes = 0
+    for r in roots:
+        a, b = w.cost(r, memo)
+        tri, shapes = tri + a, shapes + b
+    if tri > limits.max_triangles or shapes > limits.max_parts:
+        raise ReadError(
+            "over_check_limit",
+            f"the VRML scene instances about {tri:,} triangles in {shapes:,} shapes (DEF/USE), over the checker's "
+            f"limits (Limits.max_triangles / --max-triangles, Limits.max_parts)",
+        )
     for r in roots:
         w.walk(r, np.eye(4), 0)
     return w.b.build(units="millimeter (assumed; see the checker's VRML notes)")

@@ -1,0 +1,53 @@
+"""Compile saucerfab's numba kernels once: ``python -m saucerfab.warmup``.
+
+numba compiles a kernel on its first call and caches the machine code beside
+the sources (``cache=True``). Running this after installing means the first
+design or export does not pay several seconds of compile time; ``make
+install`` runs it. Kernels that cannot be compiled here are reported, not fatal.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+
+def warm_up() -> list[str]:
+    """Compile every numba kernel on tiny inputs; return what was warmed."""
+    import numpy as np
+
+    done: list[str] = []
+    from saucerfab.fabricate.kernels import warm_up as fab_warm_up
+
+    done += [f"fabricate.{k}" for k in fab_warm_up()]
+
+    import torch
+
+    from saucerfab.render import Camera, rasterize_hard, soft_rasterize
+
+    cam = Camera((0.0, -5.0, 5.0), (0.0, 0.0, 0.0), 10.0, 16)
+    v = torch.tensor([[-0.3, -0.3, 0.0], [0.3, -0.3, 0.0], [0.0, 0.3, 0.0]], dtype=torch.float32, requires_grad=True)
+    f = torch.tensor([[0, 1, 2]])
+    c = torch.full((1, 3), 0.5, requires_grad=True)
+    for dtype in (torch.float32, torch.float64):
+        img, _ = soft_rasterize(v.to(dtype), f, c.to(dtype), cam)
+        img.sum().backward()
+    done.append("render.soft_rasterize")
+    rasterize_hard(np.asarray(v.detach()), np.asarray(f), cam)
+    done.append("render.rasterize_hard")
+    return done
+
+
+def main() -> int:
+    t0 = time.perf_counter()
+    try:
+        names = warm_up()
+    except Exception as exc:  # noqa: BLE001 - a cache warm-up must never break an install
+        print(f"saucerfab warm-up skipped: {exc}", file=sys.stderr)
+        return 0
+    print(f"saucerfab: compiled {len(names)} kernels in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

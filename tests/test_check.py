@@ -1,0 +1,567 @@
+"""``saucerfab.check.check_mesh``: good files pass, each broken fixture fails for the right reason."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+import subprocess
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fixtures_check as fx
+from saucerfab.check import Limits, Report, check_mesh
+from saucerfab.errors import ConfigError
+from saucerfab.fabricate.profiles import load_profile
+
+
+def codes(r: Report, severity: str | None = None) -> set[str]:
+    return {f.code for f in r.findings if severity is None or f.severity == severity}
+
+
+def assert_clean(r: Report) -> None:
+    """Printable, with no errors and no warnings (info is fine)."""
+    assert r.verdict == "printable", r.reason()
+    assert r.exit_code == 0
+    assert not r.errors and not r.warnings, [(f.code, f.message) for f in r.findings]
+
+
+@pytest.fixture(scope="module")
+def saucer() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return fx.saucer_solid(24)
+
+
+@pytest.fixture(scope="module")
+def png() -> bytes:
+    return fx.png_bytes(2048, 2048)
+
+
+# -- good files ---------------------------------------------------------------------
+
+
+def test_textured_3mf_is_clean_with_stats(tmp_path: Path, saucer: tuple, png: bytes) -> None:
+    V, F, uv = saucer
+    p = fx.write_3mf(tmp_path / "s.3mf", V, F, uv=uv, texture=png)
+    r = check_mesh(p, printer="j55")
+    assert_clean(r)
+    s = r.stats
+    assert r.format == "3mf" and s["units"] == "millimeter" and s["units_stated"]
+    assert s["triangles"] == len(F) and s["vertices"] == len(V) and s["shells"] == 1
+    assert s["bbox_mm"]["size"] == pytest.approx([100, 100, V[:, 2].max()], abs=1e-4)
+    assert s["volume_mm3"] > 0 and s["area_mm2"] > 2 * 100 * 100
+    assert s["self_intersection_check"] == "full" and s["self_intersecting_pairs"] == 0
+    assert s["min_wall_mm"] == pytest.approx(3.0, abs=0.05)  # the flat base is the thinnest wall
+    assert s["textures"] == [{"name": "/3D/Texture/texture.png", "status": "ok", "width": 2048, "height": 2048,
+                              "format": "PNG"}]
+    assert s["coloured_fraction"] == 1.0 and s["colour"] == ["texture"]
+    # 2048 px over the 100 mm top: 520 dpi, over half of j55's 600 dpi
+    assert s["texture_dpi"] == pytest.approx(2048 / 100 * 25.4, rel=0.01)
+    assert s["file_bytes"] == p.stat().st_size
+
+
+def test_3mf_per_corner_uvs_colour_groups_and_units(tmp_path: Path) -> None:
+    V, F = fx.box()
+    corner = fx.box_uv(V)[F]
+    r = check_mesh(fx.write_3mf(tmp_path / "c.3mf", V, F, corner_uv=corner, texture=fx.png_bytes()))
+    assert_clean(r)
+    r = check_mesh(fx.write_3mf(tmp_path / "g.3mf", V, F, colors=True))
+    assert_clean(r)
+    assert r.stats["colour"] == ["vertex"] and r.stats["coloured_fraction"] == 1.0
+    r = check_mesh(fx.write_3mf(tmp_path / "i.3mf", V / 25.4, F, colors=True, unit="inch"))
+    assert r.stats["units"] == "inch" and r.stats["unit_mm"] == 25.4
+    assert r.stats["bbox_mm"]["size"] == pytest.approx([40, 30, 20], abs=1e-4)
+    assert_clean(r)
+
+
+def test_3mf_build_item_transform_is_applied(tmp_path: Path) -> None:
+    V, F = fx.box()
+    # 3MF's row-vector matrix: scale x by 2, then translate by (5, 6, 7)
+    r = check_mesh(fx.write_3mf(tmp_path / "t.3mf", V, F, colors=True,
+                                item_transform="2 0 0 0 1 0 0 0 1 5 6 7"))
+    assert r.stats["bbox_mm"]["min"] == pytest.approx([5, 6, 7])
+    assert r.stats["bbox_mm"]["size"] == pytest.approx([80, 30, 20])
+    # a mirroring transform keeps the outward winding
+    r = check_mesh(fx.write_3mf(tmp_path / "m.3mf", V, F, colors=True,
+                                item_transform="-1 0 0 0 1 0 0 0 1 0 0 0"))
+    assert_clean(r)
+
+
+def test_3mf_slow_xml_path_gives_the_same_answer(tmp_path: Path, saucer: tuple, png: bytes) -> None:
+    """Blocks the fast path declines (comments, single quotes) and reordered attributes read the same."""
+    import re
+
+    V, F, uv = saucer
+    xml = fx.model_xml(V, F, uv=uv)
+    slow = (xml.replace("<vertices>", "<vertices><!-- c -->").replace("<triangles>", "<triangles>\n<!-- c -->")
+            .replace('texid="2">', 'texid="2"><!-- c -->'))
+    slow = re.sub(r'<vertex x="([^"]*)" y="([^"]*)" z="([^"]*)"/>', r"<vertex z='\3' x='\1' y='\2'/>", slow)
+    reordered = re.sub(r'<vertex x="([^"]*)" y="([^"]*)" z="([^"]*)"/>', r'<vertex y="\2" z="\3"  x="\1" />', xml)
+    reordered = re.sub(r'<triangle v1="(\d+)" v2="(\d+)" v3="(\d+)" pid="3"',
+                       r'<triangle pid="3" v3="\3" v1="\1" v2="\2"', reordered)
+    a = check_mesh(fx.write_3mf(tmp_path / "a.3mf", V, F, uv=uv, texture=png))
+    for name, text in (("slow", slow), ("reordered", reordered)):
+        b = check_mesh(fx.write_3mf(tmp_path / f"{name}.3mf", V, F, texture=png, model=text))
+        assert b.verdict == "printable", (name, b.reason())
+        for key in ("triangles", "volume_mm3", "area_mm2", "bbox_mm", "texture_dpi", "coloured_fraction"):
+            assert a.stats[key] == b.stats[key], (name, key)
+
+
+@pytest.mark.parametrize("kind", ["stl", "stl_ascii", "obj", "ply", "ply_ascii", "wrl", "glb"])
+def test_plain_formats_from_our_writers_are_clean(tmp_path: Path, kind: str, saucer: tuple) -> None:
+    V, F, uv = saucer
+    p = tmp_path / f"s.{kind.split('_')[0]}"
+    if kind == "stl":
+        fx.write_stl(p, V, F)
+    elif kind == "stl_ascii":
+        fx.write_stl(p, V, F, ascii=True)
+    elif kind == "obj":
+        fx.write_obj(p, V, F, uv=uv, texture=fx.png_bytes())
+    elif kind == "ply":
+        fx.write_ply(p, V, F, colors=True)
+    elif kind == "ply_ascii":
+        fx.write_ply(p, V, F, binary=False, uv=uv, texture="t.png")
+        (tmp_path / "t.png").write_bytes(fx.png_bytes())
+    elif kind == "wrl":
+        fx.write_vrml(p, V, F, uv=uv, texture="t.png", translate=(1, 2, 3))
+        (tmp_path / "t.png").write_bytes(fx.png_bytes())
+    else:
+        fx.write_glb(p, V, F, uv=uv, texture=fx.png_bytes())
+    r = check_mesh(p)
+    assert_clean(r)
+    assert r.stats["triangles"] == len(F)
+    assert r.stats["volume_mm3"] == pytest.approx(check_mesh(fx.write_stl(tmp_path / "ref.stl", V, F)).stats["volume_mm3"],
+                                                  rel=1e-5)
+    if kind == "wrl":
+        assert r.stats["bbox_mm"]["min"] == pytest.approx([1, 2, 3])
+    if kind not in ("stl", "stl_ascii"):
+        assert r.stats["coloured_fraction"] == 1.0
+
+
+def test_obj_quads_polygons_and_relative_indices_read_alike(tmp_path: Path) -> None:
+    """All-quads (bulk path), mixed polygons with negative indices and comments (line path): same mesh."""
+    V, _ = fx.box()
+    quads = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+    vs = "".join(f"v {x} {y} {z}\n" for x, y, z in V)
+    (tmp_path / "q.obj").write_text(vs + "".join("f " + " ".join(str(i + 1) for i in q) + "\n" for q in quads))
+    mixed = vs + "f -8 -5 -6 -7\n" + "".join("f " + " ".join(f"{i + 1}//1" for i in q) + " # quad\n" for q in quads[1:4])
+    mixed += "f 3 4 8\nf 3 8 7\nf 4 1 5 8\n"
+    (tmp_path / "m.obj").write_text(mixed)
+    a, b = check_mesh(tmp_path / "q.obj"), check_mesh(tmp_path / "m.obj")
+    assert_clean(a)
+    assert_clean(b)
+    for key in ("triangles", "volume_mm3", "area_mm2", "shells", "welded_vertices"):
+        assert a.stats[key] == b.stats[key], key
+    assert a.stats["triangles"] == 12 and a.stats["volume_mm3"] == pytest.approx(24000)
+
+
+@pytest.mark.parametrize("fmt", ["stl", "obj", "ply", "glb"])
+def test_trimesh_written_files_are_clean(tmp_path: Path, fmt: str) -> None:
+    trimesh = pytest.importorskip("trimesh")
+    m = trimesh.creation.icosphere(subdivisions=3, radius=20.0)
+    m.apply_translation([25, 25, 25])
+    if fmt == "glb":
+        m.apply_scale(0.001)  # glTF is metres
+    p = tmp_path / f"sphere.{fmt}"
+    m.export(p)
+    r = check_mesh(p, printer="j55" if fmt != "glb" else "bureau")
+    assert r.exit_code == 0, r.reason()
+    assert not r.errors
+    assert r.stats["volume_mm3"] == pytest.approx(4 / 3 * np.pi * 20**3, rel=0.02)
+    assert r.stats["min_wall_mm"] == pytest.approx(40, rel=0.02)
+
+
+def test_lib3mf_written_3mf_is_clean(tmp_path: Path) -> None:
+    import ctypes
+
+    lib3mf = pytest.importorskip("lib3mf")
+    V, F = fx.box()
+    w = lib3mf.get_wrapper()
+    model = w.CreateModel()
+    mesh = model.AddMeshObject()
+    pos = [lib3mf.Position((ctypes.c_float * 3)(*map(float, v))) for v in V]
+    tri = [lib3mf.Triangle((ctypes.c_uint * 3)(*map(int, f))) for f in F]
+    mesh.SetGeometry(pos, tri)
+    model.AddBuildItem(mesh, w.GetIdentityTransform())
+    model.QueryWriter("3mf").WriteToFile(str(tmp_path / "lib.3mf"))
+    r = check_mesh(tmp_path / "lib.3mf", printer="j55")
+    assert r.exit_code == 0, r.reason()
+    assert r.stats["volume_mm3"] == pytest.approx(24000, rel=1e-6)
+
+
+def test_prusaslicer_written_3mf_is_clean(tmp_path: Path) -> None:
+    """A real-world 3MF: PrusaSlicer's own export (metadata, config entries, its XML layout)."""
+    exe = shutil.which("prusa-slicer")
+    assert exe, "prusa-slicer is installed by .ci/install-tools"
+    V, F = fx.box()
+    fx.write_stl(tmp_path / "box.stl", V, F)
+    out = tmp_path / "box.3mf"
+    proc = subprocess.run([exe, "--export-3mf", "-o", str(out), str(tmp_path / "box.stl")],
+                          capture_output=True, text=True, timeout=120)
+    assert out.exists(), proc.stderr[-2000:]
+    r = check_mesh(out, printer="j55")
+    assert r.exit_code == 0, r.reason()
+    assert r.stats["volume_mm3"] == pytest.approx(24000, rel=1e-4)
+
+
+def test_saucerfab_exporters_output_passes(tmp_path: Path, saucer: tuple) -> None:
+    """Every format saucerfab's own exporters write, checked as a bureau would."""
+    pytest.importorskip("saucerfab.fabricate.export_3mf")
+    from saucerfab.fabricate import registry
+    from saucerfab.fabricate.textured import TexturedMesh
+
+    V, F, uv = saucer
+    mesh = TexturedMesh(
+        name="saucer", vertices=V, faces=F, uvs=uv, face_uvs=F.copy(), texture_png=fx.png_bytes(1024, 1024),
+        texture_px=1024, vertex_rgb=np.full((len(V), 3), 128, np.uint8),
+    )
+    for fmt, writer in registry.WRITERS.items():
+        files = writer.load()(mesh)
+        for name, data in files.items():
+            (tmp_path / name).write_bytes(data)
+        mesh_file = tmp_path / f"saucer{writer.mesh_suffix}"
+        r = check_mesh(mesh_file, printer="j55" if fmt != "glb" else "bureau")
+        assert not r.errors, (fmt, r.reason())
+        assert r.stats["triangles"] == len(F), fmt
+        # glTF is y-up, so the GLB writer turns the part; compare sizes regardless of axis order
+        assert sorted(r.stats["bbox_mm"]["size"]) == pytest.approx(sorted([100, 100, V[:, 2].max()]), abs=1e-3), fmt
+        if fmt != "stl":
+            assert r.stats["coloured_fraction"] == 1.0, fmt
+
+
+# -- broken fixtures: each fails for the right code ------------------------------------
+
+
+def _broken(kind: str) -> tuple[np.ndarray, np.ndarray]:
+    V, F = fx.box()
+    if kind == "open_box":
+        return V, F[1:]
+    if kind == "flipped_face":
+        F = F.copy()
+        F[5] = F[5][::-1]
+        return V, F
+    if kind == "inverted":
+        return V, F[:, ::-1]
+    if kind == "duplicate_faces":
+        return V, np.concatenate([F, F[:1]])
+    if kind == "degenerate":
+        # an extra vertex in the middle of an edge, and a zero-area sliver along it
+        V = np.concatenate([V, [[20.0, 0, 0]]])
+        return V, np.concatenate([F, [[0, 8, 1]]])
+    if kind == "repeated_index":
+        return V, np.concatenate([F, [[0, 0, 1]]])
+    if kind == "non_manifold_edge":
+        # a second box touching the first along its vertical edge (40, 30, z): four faces on that edge
+        V2, F2 = fx.box(origin=(40, 30, 0))
+        VV = np.concatenate([V, V2[[1, 2, 3, 5, 6, 7]]])
+        remap = np.array([2, 8, 9, 10, 6, 11, 12, 13])
+        return VV, np.concatenate([F, remap[F2]])
+    if kind == "fin":
+        V = np.concatenate([V, [[20.0, -10, 10]]])
+        return V, np.concatenate([F, [[0, 1, 8], [1, 0, 8]]])  # a zero-thickness fin on edge 0-1
+    if kind == "two_shells":
+        V2, F2 = fx.box(origin=(60, 0, 0))
+        return np.concatenate([V, V2]), np.concatenate([F, F2 + 8])
+    if kind == "self_intersection":
+        V2, F2 = fx.box(origin=(10, 10, 10))
+        return np.concatenate([V, V2]), np.concatenate([F, F2 + 8])
+    if kind == "pinched_vertex":
+        V2 = V + V[6]
+        return np.concatenate([V, V2[1:]]), np.concatenate([F, np.where(F == 0, 6, F + 7)])
+    if kind == "unreferenced":
+        return np.concatenate([V, [[5.0, 5, 5]]]), F
+    raise AssertionError(kind)
+
+
+@pytest.mark.parametrize("kind, code, exit_code", [
+    ("open_box", "not_watertight", 1),
+    ("flipped_face", "inconsistent_orientation", 1),
+    ("inverted", "inverted_normals", 1),
+    ("duplicate_faces", "duplicate_faces", 1),
+    ("degenerate", "degenerate_faces", 1),
+    ("repeated_index", "degenerate_faces", 1),
+    ("non_manifold_edge", "non_manifold_edges", 1),
+    ("fin", "non_manifold_edges", 1),
+    ("self_intersection", "self_intersections", 1),
+    ("pinched_vertex", "non_manifold_vertices", 1),
+    ("two_shells", "multiple_shells", 0),
+    ("unreferenced", "unreferenced_vertices", 0),
+])
+@pytest.mark.parametrize("fmt", ["3mf", "obj", "ply"])
+def test_broken_mesh_fails_for_its_reason(tmp_path: Path, kind: str, code: str, exit_code: int, fmt: str) -> None:
+    V, F = _broken(kind)
+    p = tmp_path / f"bad.{fmt}"
+    if fmt == "3mf":
+        fx.write_3mf(p, V, F, colors=True)
+    elif fmt == "obj":
+        fx.write_obj(p, V, F, vertex_colors=True)
+    else:
+        fx.write_ply(p, V, F, colors=True)
+    r = check_mesh(p)
+    assert code in codes(r), (kind, [(f.code, f.message) for f in r.findings])
+    assert r.exit_code == exit_code, r.reason()
+    if exit_code == 0:  # a warning: strict makes it fail
+        assert code in codes(r, "warning")
+        assert r.with_strict().exit_code == 1 and check_mesh(p, strict=True).verdict == "not printable"
+    else:
+        assert code in codes(r, "error")
+    # a message says where, in millimetres, when there is a place to point at
+    f = next(f for f in r.findings if f.code == code)
+    assert "\n" not in f.message
+
+
+def test_open_box_points_at_the_hole(tmp_path: Path) -> None:
+    V, F = _broken("open_box")
+    r = check_mesh(fx.write_3mf(tmp_path / "o.3mf", V, F, colors=True))
+    f = next(f for f in r.findings if f.code == "not_watertight")
+    assert f.where is not None and f.where["count"] == 3
+    # the missing face is the bottom triangle (0, 2, 1): its edges lie in z = 0
+    assert f.where["point_mm"][2] == pytest.approx(0.0)
+    assert r.stats["boundary_edges"] == 3
+    assert "thin_walls" not in codes(r) and any("wall thickness not measured" in x.message for x in r.findings)
+
+
+def test_self_intersection_that_manifold3d_accepts(tmp_path: Path) -> None:
+    """manifold3d's status is about manifoldness only: two interpenetrating closed boxes are NoError there."""
+    manifold3d = pytest.importorskip("manifold3d")
+    V, F = _broken("self_intersection")
+    m = manifold3d.Manifold(manifold3d.Mesh(vert_properties=V.astype(np.float32), tri_verts=F.astype(np.uint32)))
+    assert m.status() == manifold3d.Error.NoError
+    r = check_mesh(fx.write_3mf(tmp_path / "x.3mf", V, F, colors=True),
+                   limits=Limits(manifold3d_crosscheck=True))
+    assert "self_intersections" in codes(r, "error")
+    assert r.stats["manifold3d_status"] == "NoError"
+    assert r.stats["self_intersecting_pairs"] > 0
+
+
+@pytest.mark.parametrize("kind, manifold3d_ok", [
+    ("open_box", False), ("flipped_face", False), ("two_shells", True), ("pinched_vertex", True),
+    # manifold3d pairs the four half-edges of an edge two boxes share and accepts it; a printer's
+    # slicer does not know which box the edge belongs to, so the checker calls it non-manifold
+    ("non_manifold_edge", True),
+])
+def test_topology_against_manifold3d(tmp_path: Path, kind: str, manifold3d_ok: bool) -> None:
+    """Where manifold3d rejects a mesh the checker does too; where they differ, it is on purpose."""
+    manifold3d = pytest.importorskip("manifold3d")
+    V, F = _broken(kind)
+    m = manifold3d.Manifold(manifold3d.Mesh(vert_properties=V.astype(np.float32), tri_verts=F.astype(np.uint32)))
+    assert (m.status() == manifold3d.Error.NoError) == manifold3d_ok
+    r = check_mesh(fx.write_3mf(tmp_path / "k.3mf", V, F, colors=True))
+    ours = not (codes(r) & {"not_watertight", "non_manifold_edges", "inconsistent_orientation"})
+    assert ours == (manifold3d_ok and kind != "non_manifold_edge"), (kind, r.codes)
+    V, F = fx.box()
+    good = manifold3d.Manifold(manifold3d.Mesh(vert_properties=V.astype(np.float32), tri_verts=F.astype(np.uint32)))
+    assert good.status() == manifold3d.Error.NoError
+
+
+def test_self_intersections_agree_with_pymeshlab(tmp_path: Path) -> None:
+    pymeshlab = pytest.importorskip("pymeshlab")
+    V, F, _ = fx.saucer_solid(12)
+    V2, F2 = fx.box((30, 30, 30), origin=(35, 35, -10))  # pokes through the saucer's bottom and top
+    cases = [(V, F), (np.concatenate([V, V2]), np.concatenate([F, F2 + len(V)]))]
+    for VV, FF in cases:
+        ms = pymeshlab.MeshSet()
+        ms.add_mesh(pymeshlab.Mesh(vertex_matrix=VV, face_matrix=FF.astype(np.int32)))
+        ms.compute_selection_by_self_intersections_per_face()
+        theirs = ms.current_mesh().face_selection_array()
+        r = check_mesh(fx.write_stl(tmp_path / "p.stl", VV, FF))
+        assert (r.stats["self_intersecting_pairs"] > 0) == bool(theirs.any())
+
+
+def test_non_finite_coordinates(tmp_path: Path) -> None:
+    V, F = fx.box()
+    V = V.copy()
+    V[3, 1] = np.nan
+    r = check_mesh(fx.write_obj(tmp_path / "n.obj", V, F))
+    assert r.exit_code == 1 and "non_finite" in codes(r, "error")
+    assert r.findings[[f.code for f in r.findings].index("non_finite")].where["vertices"] == [3]
+    V[3, 1] = np.inf
+    r = check_mesh(fx.write_stl(tmp_path / "n.stl", V, F))
+    assert "non_finite" in codes(r, "error")
+
+
+def test_index_out_of_range_is_unreadable(tmp_path: Path) -> None:
+    V, F = fx.box()
+    F = F.copy()
+    F[4, 1] = 99
+    for p in (fx.write_3mf(tmp_path / "x.3mf", V, F, colors=True), fx.write_obj(tmp_path / "x.obj", V, F),
+              fx.write_ply(tmp_path / "x.ply", V, F), fx.write_vrml(tmp_path / "x.wrl", V, F)):
+        r = check_mesh(p)
+        assert r.exit_code == 2 and r.verdict == "unreadable", (p, r.reason())
+        assert codes(r) == {"index_out_of_range"}, p
+
+
+# -- printer profile -------------------------------------------------------------------
+
+
+def test_too_big_for_the_printer(tmp_path: Path) -> None:
+    V, F = fx.box((400.0, 100.0, 50.0))
+    p = fx.write_3mf(tmp_path / "big.3mf", V, F, colors=True)
+    r = check_mesh(p, printer="j55")  # 335 x 335 x 190
+    assert "exceeds_build_volume" in codes(r, "error") and r.exit_code == 1
+    assert check_mesh(p, printer="j850").exit_code == 0  # 490 x 390 x 200
+    V, F = fx.box((100.0, 100.0, 300.0))  # fits j55 lying down
+    r = check_mesh(fx.write_3mf(tmp_path / "tall.3mf", V, F, colors=True), printer="j55")
+    assert r.exit_code == 0 and "fits_rotated" in codes(r, "info")
+
+
+def test_polygon_file_size_and_format_limits(tmp_path: Path, saucer: tuple) -> None:
+    V, F, uv = saucer
+    prof = load_profile("bureau")
+    import dataclasses
+
+    small = dataclasses.replace(prof, max_triangles=100, max_file_mb=0.001)
+    p = fx.write_stl(tmp_path / "s.stl", V, F)
+    r = check_mesh(p, printer=small)
+    assert {"too_many_triangles", "file_too_large", "format_not_accepted"} <= codes(r, "error")
+    assert r.printer == "bureau"
+
+
+def test_thin_wall_with_location_and_policy(tmp_path: Path) -> None:
+    V, F = fx.box((50.0, 50.0, 0.6))  # a 0.6 mm plate
+    p = fx.write_3mf(tmp_path / "plate.3mf", V, F, colors=True)
+    r = check_mesh(p, printer="j55")  # min wall 1.0, thin_policy warn
+    f = next(f for f in r.findings if f.code == "thin_walls")
+    assert f.severity == "warning" and r.exit_code == 0 and r.with_strict().exit_code == 1
+    assert r.stats["min_wall_mm"] == pytest.approx(0.6, abs=1e-3)
+    assert f.where is not None and len(f.where["point_mm"]) == 3
+    assert r.stats["thin_wall_fraction"] > 0.9
+    r = check_mesh(p, printer="bureau")  # min wall 2.0, refuse
+    assert "thin_walls" in codes(r, "error") and r.exit_code == 1
+    r = check_mesh(p, limits=Limits(min_wall_mm=0.5))
+    assert "thin_walls" not in codes(r)
+    r = check_mesh(p)  # no printer, no minimum: only the estimate
+    assert "thin_walls" not in codes(r) and r.stats["min_wall_mm"] == pytest.approx(0.6, abs=1e-3)
+
+
+def test_unknown_printer_is_a_config_error(tmp_path: Path) -> None:
+    V, F = fx.box()
+    with pytest.raises(ConfigError, match="unknown printer"):
+        check_mesh(fx.write_stl(tmp_path / "b.stl", V, F), printer="no-such-printer")
+
+
+# -- colour --------------------------------------------------------------------------
+
+
+def test_uv_outside_unit_square(tmp_path: Path) -> None:
+    V, F = fx.box()
+    uv = fx.box_uv(V) * 1.5 - 0.25
+    r = check_mesh(fx.write_3mf(tmp_path / "uv.3mf", V, F, uv=uv, texture=fx.png_bytes()))
+    assert "uv_out_of_range" in codes(r, "error") and r.exit_code == 1
+    assert r.stats["uv_outside_faces"] == 12
+
+
+def test_missing_and_broken_textures(tmp_path: Path) -> None:
+    V, F = fx.box()
+    uv = fx.box_uv(V)
+    r = check_mesh(fx.write_3mf(tmp_path / "m.3mf", V, F, uv=uv, texture=None))
+    assert "texture_missing" in codes(r, "error")
+    r = check_mesh(fx.write_obj(tmp_path / "m.obj", V, F, uv=uv, texture=fx.png_bytes(), write_texture=False))
+    assert "texture_missing" in codes(r, "error")
+    r = check_mesh(fx.write_3mf(tmp_path / "b.3mf", V, F, uv=uv, texture=b"\x89PNG\r\n\x1a\n garbage"))
+    assert "texture_unreadable" in codes(r, "error")
+    assert r.stats["textures"][0]["status"] == "unreadable"
+    r = check_mesh(fx.write_obj(tmp_path / "e.obj", V, F, uv=uv, texture_name="../outside.png"))
+    assert "texture_path_unsafe" in codes(r, "error")
+
+
+def test_texture_resolution_against_printer_dpi(tmp_path: Path) -> None:
+    V, F = fx.box((200.0, 200.0, 20.0))
+    uv = fx.box_uv(V)
+    r = check_mesh(fx.write_3mf(tmp_path / "lo.3mf", V, F, uv=uv, texture=fx.png_bytes(256, 256)), printer="j55")
+    assert "texture_low_dpi" in codes(r, "warning")
+    assert r.stats["texture_dpi"] == pytest.approx(256 / 200 * 25.4, rel=0.2)
+
+
+def test_partly_coloured_and_no_colour(tmp_path: Path) -> None:
+    V, F = fx.box()
+    xml = fx.model_xml(V, F, colors=True)
+    # strip the colour from the first two triangles
+    xml = xml.replace(' pid="4" p1="0" p2="1" p3="0"', "", 2)
+    r = check_mesh(fx.write_3mf(tmp_path / "p.3mf", V, F, model=xml))
+    assert "partly_coloured" in codes(r, "warning")
+    assert 0 < r.stats["coloured_fraction"] < 1
+    r = check_mesh(fx.write_3mf(tmp_path / "n.3mf", V, F))
+    assert "no_colour" in codes(r, "info") and r.exit_code == 0
+
+
+# -- units -----------------------------------------------------------------------------
+
+
+def test_unit_plausibility(tmp_path: Path) -> None:
+    V, F = fx.box((0.1, 0.08, 0.01))  # a saucer written in metres, read as millimetres
+    r = check_mesh(fx.write_stl(tmp_path / "m.stl", V, F))
+    f = next(f for f in r.findings if f.code == "units_suspect")
+    assert "metres" in f.message and f.severity == "warning"
+    V, F = fx.box((100.0, 80.0, 10.0))
+    r = check_mesh(fx.write_glb(tmp_path / "mm.glb", V, F, scale=1.0))  # mm written as metres
+    assert "units_suspect" in codes(r, "warning") and "0.001" in next(
+        f.message for f in r.findings if f.code == "units_suspect")
+    assert check_mesh(fx.write_glb(tmp_path / "ok.glb", V, F)).stats["bbox_mm"]["size"] == pytest.approx(
+        [100, 80, 10], rel=1e-6)
+
+
+def test_extension_mismatch_is_read_by_content(tmp_path: Path) -> None:
+    V, F = fx.box()
+    p = fx.write_3mf(tmp_path / "really3mf.stl", V, F, colors=True)
+    r = check_mesh(p)
+    assert r.format == "3mf" and "extension_mismatch" in codes(r, "warning")
+
+
+# -- report ----------------------------------------------------------------------------
+
+
+def test_report_to_dict_is_json_and_strict_round_trip(tmp_path: Path) -> None:
+    V, F = _broken("two_shells")
+    r = check_mesh(fx.write_3mf(tmp_path / "t.3mf", V, F, colors=True), printer="j55")
+    d = json.loads(json.dumps(r.to_dict(), allow_nan=False))
+    assert d["schema"] == "saucerfab.check/1" and d["printer"] == "j55" and d["verdict"] == "printable"
+    s = r.with_strict()
+    assert s.strict and s.verdict == "not printable" and s.exit_code == 1
+    assert s.with_strict(False).exit_code == 0
+    assert "multiple_shells" in s.reason()
+
+
+def test_zip_of_only_a_texture_is_not_a_mesh(tmp_path: Path) -> None:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        z.writestr("image.png", fx.png_bytes())
+    (tmp_path / "x.3mf").write_bytes(buf.getvalue())
+    r = check_mesh(tmp_path / "x.3mf")
+    assert r.exit_code == 2 and codes(r) == {"not_a_mesh"}
+
+
+def test_zipped_obj_upload_bundle(tmp_path: Path, saucer: tuple) -> None:
+    """OBJ + MTL + PNG zipped as one file (what bureaus ask for) is read with its textures from the archive."""
+    V, F, uv = saucer
+    src = tmp_path / "src"
+    src.mkdir()
+    fx.write_obj(src / "part.obj", V, F, uv=uv, texture=fx.png_bytes(512, 512))
+    bundle = tmp_path / "upload.zip"
+    with zipfile.ZipFile(bundle, "w", zipfile.ZIP_DEFLATED) as z:
+        for f in sorted(src.iterdir()):
+            z.write(f, f"part/{f.name}")
+    r = check_mesh(bundle, printer="bureau")
+    assert r.format == "obj" and r.exit_code == 0, r.reason()
+    assert "from_archive" in codes(r, "info")
+    assert r.stats["textures"][0]["status"] == "ok" and r.stats["coloured_fraction"] == 1.0
+    # the same bundle without its texture, or with two meshes, says so
+    with zipfile.ZipFile(tmp_path / "notex.zip", "w") as z:
+        z.write(src / "part.obj", "part.obj")
+        z.write(src / "part.mtl", "part.mtl")
+    assert "texture_missing" in codes(check_mesh(tmp_path / "notex.zip"), "error")
+    with zipfile.ZipFile(tmp_path / "two.zip", "w") as z:
+        z.write(src / "part.obj", "a.obj")
+        z.write(src / "part.obj", "b.obj")
+    r = check_mesh(tmp_path / "two.zip")
+    assert r.exit_code == 2 and codes(r) == {"unsupported_format"}
+
+
+def test_obj_without_its_material_library(tmp_path: Path) -> None:
+    V, F = fx.box()
+    p = fx.write_obj(tmp_path / "m.obj", V, F, uv=fx.box_uv(V), texture=fx.png_bytes())
+    (tmp_path / "m.mtl").unlink()
+    r = check_mesh(p)
+    assert "texture_missing" in codes(r, "error") and "material library" in r.reason()
