@@ -208,6 +208,7 @@ def test_reference_outcomes(reference: tuple[Path, object]) -> None:
     assert [j["id"] for j in report["jobs"]] == ALL_JOBS
     html = (out / HTML_NAME).read_text()
     assert "broken-upload" in html and "truncated" in html and "<script" not in html
+    assert f'<img src="{RAW_JOB}/design/previews/composite.png"' in html  # the design's preview
     assert_no_temporaries(out)
 
 

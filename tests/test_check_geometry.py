@@ -9,7 +9,7 @@ import pytest
 
 from fixtures_check import box, saucer_solid
 from saucerfab.check.bvh import BVH, cross3, ray_triangle, tri_tri_intersect
-from saucerfab.check.topology import face_geometry, topology, weld
+from saucerfab.check.topology import components, face_geometry, topology, weld
 
 # -- slow references ---------------------------------------------------------------
 
@@ -105,19 +105,37 @@ def test_first_hits_equal_brute_force() -> None:
     rng = np.random.default_rng(4)
     V, F, _ = saucer_solid(6)
     tri = V[F]
-    o = rng.random((120, 3)) * [100, 100, 7]
-    d = rng.normal(size=(120, 3))
+    o = rng.random((60, 3)) * [100, 100, 7]
+    d = rng.normal(size=(60, 3))
     d /= np.linalg.norm(d, axis=1)[:, None]
-    excl = np.full(120, -1)
+    excl = np.full(60, -1)
     t, hit, complete = BVH.build(tri).first_hits(tri, o, d, excl, t_min=1e-9, budget=10**8)
     assert complete
-    assert np.isfinite(t).sum() > 30  # many rays start inside the solid and must hit it
-    for r in range(120):
+    assert np.isfinite(t).sum() > 15  # many rays start inside the solid and must hit it
+    for r in range(60):
         best = min((s for k in range(len(tri)) if (s := ref_ray_triangle(o[r], d[r], tri[k])) is not None and s > 1e-9),
                    default=np.inf)
         assert t[r] == pytest.approx(best, rel=1e-9, abs=1e-9)
         if np.isfinite(best):
             assert ref_ray_triangle(o[r], d[r], tri[hit[r]]) == pytest.approx(best, rel=1e-9)
+
+
+def test_threads_give_the_same_answers() -> None:
+    V, F, _ = saucer_solid(100)  # ~39,000 triangles: deep enough frontiers to be split
+    tri = V[F]
+    bvh = BVH.build(tri)
+    i1, j1, c1 = bvh.overlapping_pairs(tol=1e-7, budget=10**9, workers=1)
+    i2, j2, c2 = bvh.overlapping_pairs(tol=1e-7, budget=10**9, workers=3)
+    assert c1 and c2 and len(i1) > 100_000
+    assert set(zip(i1.tolist(), j1.tolist())) == set(zip(i2.tolist(), j2.tolist()))
+    rng = np.random.default_rng(9)
+    o = rng.random((3000, 3)) * [100, 100, 7]
+    d = rng.normal(size=(3000, 3))
+    excl = np.full(3000, -1)
+    a = bvh.first_hits(tri, o, d, excl, t_min=1e-9, budget=10**9, workers=1)
+    b = bvh.first_hits(tri, o, d, excl, t_min=1e-9, budget=10**9, workers=3)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
 
 
 def test_first_hits_respects_exclude_and_t_max() -> None:
@@ -189,6 +207,26 @@ def test_tri_tri_coplanar_disjoint_and_overlapping() -> None:
     fa = np.tile([0, 1, 2], (3, 1))
     fb = np.tile([3, 4, 5], (3, 1))
     np.testing.assert_array_equal(tri_tri_intersect(A, B, fa, fb, 1e-9), [False, False, True])
+
+
+def test_components_match_scipy() -> None:
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rng = np.random.default_rng(8)
+    for n, e in [(1, 0), (10, 0), (500, 300), (2000, 1900), (3000, 6000)]:
+        u, v = rng.integers(0, n, e), rng.integers(0, n, e)
+        lab = components(n, u, v)
+        k, ref = connected_components(coo_matrix((np.ones(e), (u, v)), shape=(n, n)), directed=False)
+        assert len(np.unique(lab)) == k
+        # same partition: a bijection between labels
+        pairs = set(zip(lab.tolist(), ref.tolist()))
+        assert len(pairs) == k
+        assert (lab <= np.arange(n)).all() and (lab[lab] == lab).all()  # labels are roots
+    # a long path (diameter n) still converges
+    n = 100_000
+    lab = components(n, np.arange(n - 1), np.arange(1, n))
+    assert (lab == 0).all()
 
 
 def test_weld_merges_exact_duplicates_and_signed_zero() -> None:

@@ -195,8 +195,18 @@ def test_auto_dispatch_uses_numba_on_cpu(monkeypatch: pytest.MonkeyPatch) -> Non
     assert calls == [1]
 
 
-def test_torch_backend_is_the_cuda_path_and_runs_anywhere() -> None:
-    """backend="auto" on a CUDA tensor takes the torch path; forced here on the CPU."""
+def test_dispatch_by_device() -> None:
+    """"auto" takes the numba kernels on the CPU and the torch backend (the GPU path)
+    elsewhere; the choice needs no CUDA device to test."""
+    from saucerfab.render.soft import select_backend
+
+    assert select_backend("auto", torch.device("cpu")) == "numba"
+    assert select_backend("auto", torch.device("cuda", 0)) == "torch"
+    assert select_backend("torch", torch.device("cpu")) == "torch"
+    assert select_backend("torch", torch.device("cuda")) == "torch"
+    with pytest.raises(ConfigError, match="CPU"):
+        select_backend("numba", torch.device("cuda"))
+    # forcing the torch backend on CPU tensors runs the code that CUDA tensors get
     v, f, c = random_scene(3, seed=2)
     a = soft_rasterize(v, f, c, ndc_camera(8), backend="torch")
     b = soft_rasterize(v, f, c, ndc_camera(8), backend="numba")

@@ -102,3 +102,19 @@ def test_two_reflection_design_shows_three_recognisable_views(tmp_path) -> None:
         iou = (fg & want.mask).sum() / max((fg | want.mask).sum(), 1)
         assert iou > 0.6, f"{view}: IoU {iou:.2f}"
     assert "prism_placement" in __import__("json").loads((out / "design.json").read_text())["metrics"]
+    # ... and it exports to a valid, printable solid with a prism-shaped seat
+    import json
+
+    from saucerfab.check import check_mesh
+    from saucerfab.fabricate.options import FabOptions
+    from saucerfab.fabricate.pipeline import export_design
+
+    res = export_design(out, tmp_path / "print", printer="j55", cup_diameter_mm=80, formats=["3mf"],
+                        options=FabOptions(texture_px=512))
+    (three_mf,) = res.files["3mf"]
+    report = check_mesh(three_mf)
+    assert report.findings is not None
+    assert not [f for f in report.findings if f.severity == "error"], [f.message for f in report.findings]
+    sj = json.loads((tmp_path / "print" / "scene.json").read_text())
+    assert sj["cup"]["shape"] == "prism" and sj["cup"]["sides"] == 6
+    assert set(sj["views"]) == {"direct", "reflected", "reflected2"}

@@ -171,6 +171,10 @@ def report_html(data: dict[str, Any]) -> str:
             for f in j.get("files", [])
             if j.get("output") and f.startswith("export/") and not f.endswith((".png", ".mtl", ".json"))
         )
+        preview = "design/previews/composite.png"
+        if j.get("output") and preview in j.get("files", []):
+            src = e(j["output"] + "/" + preview)
+            files += f'<a href="{src}"><img src="{src}" alt="preview" height="64"></a>'
         reason = e(j.get("reason") or "")
         if j.get("stage") and j.get("status") == "failed":
             reason = f"<b>{e(j['stage'])}</b>: {reason}"

@@ -102,12 +102,14 @@ class BVH:
         budget: int,
         t_max: np.ndarray | None = None,
         chunk: int = 512,
+        workers: int = 1,
     ) -> tuple[np.ndarray, np.ndarray, bool]:
         """Nearest hit along each ray in (``t_min``, ``t_max[r]``], skipping triangle ``exclude[r]``.
 
         Returns (t (R,) with inf for no hit, triangle (R,) with -1, complete):
-        ``complete`` is False when ``budget`` (box plus triangle tests) ran out;
-        rays not reached keep inf.
+        ``complete`` is False when ``budget`` (box plus triangle tests) ran
+        out; rays not reached keep inf. Rays go in chunks, in ``workers``
+        threads, each chunk with its share of the budget.
         """
         R = len(origins)
         if t_max is None:
@@ -116,16 +118,19 @@ class BVH:
         hit = np.full(R, -1, dtype=np.int64)
         with np.errstate(divide="ignore"):
             inv = 1.0 / dirs
-        used = 0
-        for s in range(0, R, chunk):
+        starts = list(range(0, R, chunk))
+        share = budget // max(1, len(starts))
+
+        def run(s: int) -> bool:
             rays = np.arange(s, min(R, s + chunk))
             node = np.zeros(len(rays), dtype=np.int64)
+            used = 0
             for d in range(1, self.depth + 1):
                 rays = np.repeat(rays, 2)
                 node = (np.repeat(node, 2) * 2) + np.tile([0, 1], len(node))
                 used += len(rays)
-                if used > budget:
-                    return best, hit, False
+                if used > share:
+                    return False
                 lo = self.lo[d]
                 hi = self.hi[d]
                 tnear = np.full(len(rays), -np.inf)
@@ -143,15 +148,12 @@ class BVH:
                 rays = rays[keep]
                 node = node[keep]
                 if not len(rays):
-                    break
-            if not len(rays):
-                continue
+                    return True
             t_idx = self.leaf_tri[node]
             keep = (t_idx >= 0) & (t_idx != exclude[rays])
             rays, t_idx = rays[keep], t_idx[keep]
-            used += len(rays)
-            if used > budget:
-                return best, hit, False
+            if used + len(rays) > share:
+                return False
             t = ray_triangle(origins[rays], dirs[rays], tri[t_idx])
             ok = (t > t_min) & (t <= t_max[rays])
             rays, t, t_idx = rays[ok], t[ok], t_idx[ok]
@@ -160,27 +162,69 @@ class BVH:
                 rays, t, t_idx = rays[order], t[order], t_idx[order]
                 first = np.ones(len(rays), dtype=bool)
                 first[1:] = rays[1:] != rays[:-1]
-                best[rays[first]] = t[first]
+                best[rays[first]] = t[first]  # chunks own disjoint rays: no two threads write one entry
                 hit[rays[first]] = t_idx[first]
-        return best, hit, True
+            return True
+
+        if workers > 1 and len(starts) > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(max_workers=workers) as ex:
+                done = list(ex.map(run, starts))
+        else:
+            done = [run(s) for s in starts]
+        return best, hit, all(done)
 
     # ---- pairs ------------------------------------------------------------
-    def overlapping_pairs(self, tol: float, budget: int) -> tuple[np.ndarray, np.ndarray, bool]:
+    def overlapping_pairs(self, tol: float, budget: int, workers: int = 1) -> tuple[np.ndarray, np.ndarray, bool]:
         """Triangle pairs (i < j by leaf) whose boxes overlap (padded by ``tol``).
 
         Returns (i, j, complete). Work stays within about ``budget`` node-pair
         tests: where a level's frontier would exceed its share, a fixed
         random sample of it goes on, and ``complete`` is False (the pairs
-        returned are then a sample).
+        returned are then a sample). With ``workers`` > 1 the deep levels,
+        where the work is, run in threads on slices of the frontier (numpy
+        releases the GIL in its loops).
         """
         a = np.zeros(1, dtype=np.int64)
         b = np.zeros(1, dtype=np.int64)
+        d = 0
         used = 0
         complete = True
-        rng = np.random.default_rng(0)
+        # the top levels serially, until the frontier is worth splitting
+        while d < self.depth and (workers <= 1 or len(a) < 16384):
+            a, b, u, ok = self._descend(a, b, d, d + 1, budget - used, 0, tol)
+            d += 1
+            used += u
+            complete &= ok
+            if not len(a):
+                break
+        if d < self.depth and len(a):
+            from concurrent.futures import ThreadPoolExecutor
+
+            cuts = np.linspace(0, len(a), workers + 1).astype(int)
+            left = budget - used
+            jobs = [(a[i:j], b[i:j], d, self.depth, max(1000, left * (j - i) // len(a)), k, tol)
+                    for k, (i, j) in enumerate(zip(cuts[:-1], cuts[1:]))]
+            with ThreadPoolExecutor(max_workers=workers) as ex:
+                parts = list(ex.map(lambda job: self._descend(*job), jobs))
+            a = np.concatenate([p[0] for p in parts])
+            b = np.concatenate([p[1] for p in parts])
+            complete &= all(p[3] for p in parts)
+        keep = a != b
+        ti, tj = self.leaf_tri[a[keep]], self.leaf_tri[b[keep]]
+        ok = (ti >= 0) & (tj >= 0)
+        return ti[ok], tj[ok], complete
+
+    def _descend(self, a: np.ndarray, b: np.ndarray, d0: int, d1: int, budget: int, seed: int, tol: float
+                 ) -> tuple[np.ndarray, np.ndarray, int, bool]:
+        """Overlapping node pairs (a, b) at level d0 -> those at level d1; (a, b, tests used, complete)."""
+        used = 0
+        complete = True
+        rng = np.random.default_rng(seed)
         same_kids = (np.array([0, 0, 1]), np.array([0, 1, 1]))
         diff_kids = (np.array([0, 0, 1, 1]), np.array([0, 1, 0, 1]))
-        for d in range(1, self.depth + 1):
+        for d in range(d0 + 1, d1 + 1):
             same = a == b
             # children of (a, a): (2a,2a), (2a,2a+1), (2a+1,2a+1); of (a, b), a<b: all four
             sa, da, db = 2 * a[same], 2 * a[~same], 2 * b[~same]
@@ -202,10 +246,7 @@ class BVH:
             a, b = a2[ov], b2[ov]
             if not len(a):
                 break
-        keep = a != b
-        ti, tj = self.leaf_tri[a[keep]], self.leaf_tri[b[keep]]
-        ok = (ti >= 0) & (tj >= 0)
-        return ti[ok], tj[ok], complete
+        return a, b, used, complete
 
 
 def ray_triangle(o: np.ndarray, d: np.ndarray, tri: np.ndarray) -> np.ndarray:

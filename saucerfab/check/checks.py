@@ -44,6 +44,15 @@ _ABSURD_MM = 1e9
 _PAIR_CHUNK = 150_000
 
 
+def _workers() -> int:
+    """Threads for the numpy-heavy kernels: the cores this process may use, at most 4."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        n = os.cpu_count() or 1
+    return max(1, min(4, n))
+
+
 def _pt(p: np.ndarray) -> list[float]:
     return [round(float(x), 4) for x in p]
 
@@ -158,23 +167,24 @@ def run_checks(
     nd = ~topo.index_degenerate
     key = (srt[:, 0] * len(Vu) + srt[:, 1]) * len(Vu) + srt[:, 2] if len(Vu) < 2_000_000 else None
     if key is not None:
-        _, first_idx, inv, cnt = np.unique(key[nd], return_index=True, return_inverse=True, return_counts=True)
+        _, first_idx, inv = np.unique(key[nd], return_index=True, return_inverse=True)
     else:
-        _, first_idx, inv, cnt = np.unique(srt[nd], axis=0, return_index=True, return_inverse=True, return_counts=True)
+        _, first_idx, inv = np.unique(srt[nd], axis=0, return_index=True, return_inverse=True)
     inv = inv.reshape(-1)
     nd_idx = np.flatnonzero(nd)
-    dup_mask = np.zeros(m, dtype=bool)
-    dup_mask[nd_idx] = cnt[inv] > 1
+    original = np.full(m, -1, dtype=np.int64)
+    original[nd_idx] = nd_idx[first_idx[inv]]  # the first face with the same three vertices
     is_extra_copy = np.zeros(m, dtype=bool)
-    is_extra_copy[nd_idx] = nd_idx != nd_idx[first_idx[inv]]
+    is_extra_copy[nd_idx] = nd_idx != original[nd_idx]
     stats["duplicate_faces"] = int(is_extra_copy.sum())
     if is_extra_copy.any():
-        idx = np.flatnonzero(dup_mask)
+        extra = np.flatnonzero(is_extra_copy)
+        e0, o0 = int(extra[0]), int(original[extra[0]])
         out.append(finding(
             "duplicate_faces",
-            f"{int(is_extra_copy.sum()):,} faces repeat another face's three vertices (first: faces "
-            f"{', '.join(str(int(i)) for i in idx[:2])})",
-            where=_where(centroids[idx[0]], idx, count=int(is_extra_copy.sum())),
+            f"{len(extra):,} faces repeat another face's three vertices (first: face {e0} repeats face {o0}, "
+            f"near {_fmt_pt(centroids[e0])})",
+            where=_where(centroids[e0], [o0, *extra[:9].tolist()], count=len(extra)),
         ))
 
     unref = int((~used).sum())
@@ -320,7 +330,7 @@ def _self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndar
     # triangle), capped by the limit, so a pile of overlapping triangles ends quickly as "partial".
     visit_budget = min(limits.max_pair_tests, 200 * m + 1_000_000)
     pair_budget = min(limits.max_pair_tests // 2, 40 * m + 1_000_000)
-    ii, jj, complete = bvh.overlapping_pairs(tol=eps, budget=visit_budget)
+    ii, jj, complete = bvh.overlapping_pairs(tol=eps, budget=visit_budget, workers=_workers())
     if len(ii) > pair_budget:
         ii, jj, complete = ii[:pair_budget], jj[:pair_budget], False
     def narrow(s: int) -> np.ndarray:
@@ -333,7 +343,7 @@ def _self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndar
         # numpy releases the GIL in its loops: chunks in threads use a second core when there is one
         from concurrent.futures import ThreadPoolExecutor
 
-        with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as ex:
+        with ThreadPoolExecutor(max_workers=_workers()) as ex:
             found = list(ex.map(narrow, starts))
     else:
         found = [narrow(s) for s in starts]
@@ -377,7 +387,7 @@ def _thin_walls(bvh: BVH, tri: np.ndarray, normals: np.ndarray, areas: np.ndarra
     pts = np.einsum("kj,kjd->kd", w, tri[f])
     dirs = -normals[f]
     budget = min(limits.max_ray_tests, 2000 * k + 20 * len(tri))
-    t, hit, complete = bvh.first_hits(tri, pts, dirs, f, t_min=1e-7 * diag, budget=budget)
+    t, hit, complete = bvh.first_hits(tri, pts, dirs, f, t_min=1e-7 * diag, budget=budget, workers=_workers())
     # A wall is measured where the ray meets a surface facing back at it (normals more than 120 degrees
     # apart). Near an edge whose faces meet at under 90 degrees the ray clips the neighbouring face at a
     # tiny distance; that is a corner, not a wall, unless the wedge is sharper than 60 degrees.

@@ -86,7 +86,12 @@ def scene_dict(scene: Scene, solid: Solid) -> dict[str, Any]:
         "schema": SCHEMA,
         "units": "mm",
         "camera": {"position": _pt(m, scene.camera), "up": [0.0, 0.0, 1.0]},
-        "views": {"direct": view("direct"), "reflected": view("reflected")},
+        "views": {
+            "direct": view("direct"),
+            "reflected": view("reflected"),
+            # a prism design with two reflected images has its own frame for the second
+            **({"reflected2": view("reflected2")} if scene.reflected2 is not None else {}),
+        },
         "cup": cup_d,
         "model_to_file": [[_r(c) for c in row] for row in m.tolist()],
         "mm_per_unit": _r(s),

@@ -68,6 +68,27 @@ def distance_threshold(sigma: float, dist_eps: float) -> float:
     return math.log(1.0 / dist_eps - 1.0) * sigma
 
 
+def select_backend(backend: str, device: "torch.device") -> str:
+    """The backend that runs: ``"numba"`` or ``"torch"``.
+
+    ``"auto"`` picks the compiled numba kernels for CPU tensors and the torch
+    backend for any other device (CUDA: there it is the GPU path).
+
+    Raises:
+        ConfigError: an unknown backend, or ``"numba"`` for tensors not on the CPU.
+    """
+    if backend not in ("auto", "torch", "numba"):
+        raise ConfigError(f"backend must be 'auto', 'torch' or 'numba', got {backend!r}")
+    if backend == "auto":
+        return "numba" if device.type == "cpu" else "torch"
+    if backend == "numba" and device.type != "cpu":
+        raise ConfigError(
+            f"backend='numba' runs on the CPU, but the tensors are on {device}; "
+            "use backend='auto' or 'torch', or move them with .cpu()"
+        )
+    return backend
+
+
 def _check_args(
     vertices: "torch.Tensor",
     faces: "torch.Tensor",
@@ -184,8 +205,7 @@ def soft_rasterize(
     import torch
 
     _check_args(vertices, faces, face_colors, sigma, gamma, background, near, far, eps, dist_eps)
-    if backend not in ("auto", "torch", "numba"):
-        raise ConfigError(f"backend must be 'auto', 'torch' or 'numba', got {backend!r}")
+    chosen = select_backend(backend, vertices.device)
     colors = face_colors.to(vertices.dtype)
     faces = faces.to(torch.int64)
     params = dict(
@@ -197,14 +217,7 @@ def soft_rasterize(
         eps=float(eps),
         dist_eps=float(dist_eps),
     )
-    if backend == "auto":
-        backend = "numba" if vertices.device.type == "cpu" else "torch"
-    if backend == "numba":
-        if vertices.device.type != "cpu":
-            raise ConfigError(
-                f"backend='numba' runs on the CPU, but the tensors are on {vertices.device}; "
-                "use backend='auto' or 'torch', or move them with .cpu()"
-            )
+    if chosen == "numba":
         from saucerfab.render.soft_numba import soft_rasterize_numba
 
         return soft_rasterize_numba(vertices, faces, colors, camera, **params)  # type: ignore[arg-type]
