@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -39,6 +40,12 @@ def cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or "unknown"
+
+
+def cpu_seconds() -> float:
+    """User + system CPU time of this process and its finished children."""
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def make_manifest(folder: Path, jobs: int, raw: int, texture_px: int) -> Path:
@@ -102,31 +109,39 @@ def main() -> None:
         configs = [("in-process", 0), ("1 worker", 1), ("2 workers", 2)]
         times: dict[str, list[float]] = {name: [] for name, _ in configs}
         loads: dict[str, list[float]] = {name: [] for name, _ in configs}
+        cpus: dict[str, list[float]] = {name: [] for name, _ in configs}
         for r in range(args.repeat):
             for name, workers in configs:  # interleaved, so drift in machine load hits all alike
                 out = Path(td) / f"out-{name}-{r}"
                 load0 = os.getloadavg()[0]
+                cpu0 = cpu_seconds()
                 t = time.perf_counter()
                 result = run_batch(manifest, out, workers=workers)
                 times[name].append(time.perf_counter() - t)
+                cpus[name].append(cpu_seconds() - cpu0)
                 loads[name].append((load0 + os.getloadavg()[0]) / 2)
                 assert result.ok, [(o.id, o.reason) for o in result.outcomes if o.status != "ok"]
-                print(f"  run {r + 1}/{args.repeat} {name:11s} {times[name][-1]:7.2f} s  load {loads[name][-1]:.1f}", flush=True)
+                print(
+                    f"  run {r + 1}/{args.repeat} {name:11s} {times[name][-1]:7.2f} s wall "
+                    f"{cpus[name][-1]:7.2f} s CPU  load {loads[name][-1]:.1f}",
+                    flush=True,
+                )
     ref = statistics.median(times["1 worker"])
     print()
     best = min(times["1 worker"])
     print(
         f"{'engine':12s} {'median s':>9s} {'min s':>7s} {'max s':>7s} {'jobs/min':>9s} "
-        f"{'vs 1 worker':>12s} {'min vs min':>11s} {'load':>5s}"
+        f"{'vs 1 worker':>12s} {'min vs min':>11s} {'CPU s':>6s} {'load':>5s}"
     )
     for name, _ in configs:
         med = statistics.median(times[name])
         print(
             f"{name:12s} {med:9.2f} {min(times[name]):7.2f} {max(times[name]):7.2f} "
             f"{60 * total / med:9.1f} {ref / med:11.2f}x {best / min(times[name]):10.2f}x "
-            f"{statistics.median(loads[name]):5.1f}"
+            f"{statistics.median(cpus[name]):6.1f} {statistics.median(loads[name]):5.1f}"
         )
     print("jobs/min and 'vs 1 worker' from medians; 'min vs min' compares the fastest runs;")
+    print("CPU s: CPU time of the driver and its worker processes (median);")
     print("load: the 1-minute load average around each run (median) -- above nproc means other work shared the CPUs")
 
 

@@ -49,8 +49,8 @@ def build_problem(dtype: torch.dtype = torch.float32):  # type: ignore[no-untype
     Returns ``(heights, views, colors, note)``: the (N, N) starting heights, a
     function ``views(h) -> [(vertices, faces, face_ids, camera), ...]`` (the
     direct view, then one reflected part per mirror piece; ``face_ids`` index
-    the saucer faces, for their colours), the per-face colours and a note on
-    the reflected geometry.
+    the saucer faces, for their colours, None for all of them), the per-face
+    colours and a note on the reflected geometry.
     """
     from saucerfab.mirror import reflect, reflected_mesh
 
@@ -60,7 +60,6 @@ def build_problem(dtype: torch.dtype = torch.float32):  # type: ignore[no-untype
     heights0 = base_shape("waves", n)
     xy = torch.as_tensor(grid.xy(), dtype=dtype)
     faces = torch.as_tensor(triangulate(n))
-    all_ids = torch.arange(faces.shape[0])
     pieces = reflect(scene, grid.xy())
     parts = [
         (torch.as_tensor(p.r_xy, dtype=dtype), torch.as_tensor(m.faces), torch.as_tensor(m.face_ids))
@@ -73,9 +72,9 @@ def build_problem(dtype: torch.dtype = torch.float32):  # type: ignore[no-untype
         f"{faces.shape[0]:,} faces reflect validly"
     )
 
-    def views(h: torch.Tensor) -> list[tuple[torch.Tensor, torch.Tensor, torch.Tensor, Camera]]:
+    def views(h: torch.Tensor) -> list[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None, Camera]]:
         z = h.reshape(-1, 1)
-        out = [(torch.cat([xy, z], dim=1), faces, all_ids, cam_d)]
+        out = [(torch.cat([xy, z], dim=1), faces, None, cam_d)]
         out += [(torch.cat([r, z], dim=1), f, ids, cam_r) for r, f, ids in parts]
         return out
 
@@ -90,7 +89,8 @@ def iteration(heights, views, colors, targets, sigma, backend):  # type: ignore[
     c = colors.clone().requires_grad_(True)
     loss = 0.0
     for (verts, faces, ids, cam), (ti, ta) in zip(views(h), targets):
-        image, alpha = soft_rasterize(verts, faces, c[ids], cam, sigma=sigma, backend=backend)
+        cf = c if ids is None else torch.index_select(c, 0, ids)
+        image, alpha = soft_rasterize(verts, faces, cf, cam, sigma=sigma, backend=backend)
         loss = loss + ((image - ti) ** 2).sum() + ((alpha - ta) ** 2).sum()
     loss.backward()
     return h.grad, c.grad
@@ -126,14 +126,14 @@ def machine() -> str:
 _numba_ran = False
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
     global _numba_ran
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=7, help="timed numba iterations per sigma")
     ap.add_argument("--torch-repeat", type=int, default=2, help="timed torch iterations per sigma")
     ap.add_argument("--sigmas", type=float, nargs="+", default=[1e-5, 1e-7])
     ap.add_argument("--write", action="store_true", help="write benchmarks/results_render.md")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
     heights, views, colors, note = build_problem()
     rng = np.random.default_rng(0)
@@ -156,6 +156,13 @@ def main() -> None:
         tn = timed(lambda: iteration(*work, backend="numba"), args.repeat)
         cpu_numba = (time.process_time() - c0) / args.repeat
         rss_numba = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        # the same on one thread: what the second core buys (when it is free)
+        import numba
+
+        threads = numba.get_num_threads()
+        numba.set_num_threads(1)
+        t1 = timed(lambda: iteration(*work, backend="numba"), args.repeat)
+        numba.set_num_threads(threads)
         iteration(*work, backend="torch")
         c0 = time.process_time()
         tt = timed(lambda: iteration(*work, backend="torch"), args.torch_repeat)
@@ -168,14 +175,15 @@ def main() -> None:
         rows.append(dict(
             sigma=sigma, pairs=pairs, numba_ms=1e3 * statistics.median(tn), numba_min=1e3 * min(tn),
             torch_ms=1e3 * statistics.median(tt), numba_mib=numba_peak / 2**20,
-            numba_cpu=1e3 * cpu_numba, torch_cpu=1e3 * cpu_torch,
+            numba_cpu=1e3 * cpu_numba, torch_cpu=1e3 * cpu_torch, numba_1t=1e3 * statistics.median(t1),
             rss_numba=rss_numba, rss_torch=rss_torch, agree=agree,
         ))
         r = rows[-1]
         print(
             f"sigma {sigma:g}: pairs {pairs / 1e6:.2f} M | numba {r['numba_ms']:.1f} ms (min {r['numba_min']:.1f}, "
-            f"CPU {r['numba_cpu']:.0f} ms) "
-            f"| torch {r['torch_ms']:.0f} ms (CPU {r['torch_cpu']:.0f}) | x{r['torch_ms'] / r['numba_ms']:.0f} | numpy peak "
+            f"CPU {r['numba_cpu']:.0f} ms; 1 thread {r['numba_1t']:.1f} ms) "
+            f"| torch {r['torch_ms']:.0f} ms (CPU {r['torch_cpu']:.0f}) "
+            f"| x{r['torch_ms'] / r['numba_ms']:.0f} | numpy peak "
             f"{r['numba_mib']:.0f} MiB | max RSS after numba {rss_numba:.0f} MiB, after torch {rss_torch:.0f} MiB "
             f"| grad rel diff {agree:.1e}",
             flush=True,
@@ -186,6 +194,7 @@ def main() -> None:
         out = Path(__file__).with_name("results_render.md")
         out.write_text(text)
         print(f"wrote {out}")
+    return 0
 
 
 def report(rows: list[dict], note: str, args: argparse.Namespace) -> str:
@@ -204,15 +213,15 @@ def report(rows: list[dict], note: str, args: argparse.Namespace) -> str:
         "Wall times are medians of the timed iterations; CPU is the process CPU time per iteration "
         "(all threads), which other jobs on the machine disturb less than wall time.",
         "",
-        "| sigma | candidate pairs (both views) | numba ms/iter | numba min | numba CPU ms | torch ms/iter "
-        "| torch CPU ms | speed-up (wall) | numpy peak (numba iter) | max RSS after numba / torch "
-        "| grad rel. diff |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| sigma | candidate pairs (both views) | numba ms/iter | numba min | numba CPU ms "
+        "| numba 1 thread ms | torch ms/iter | torch CPU ms | speed-up (wall) | numpy peak (numba iter) "
+        "| max RSS after numba / torch | grad rel. diff |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['sigma']:g} | {r['pairs'] / 1e6:.2f} M | {r['numba_ms']:.1f} | {r['numba_min']:.1f} "
-            f"| {r['numba_cpu']:.0f} | {r['torch_ms']:.0f} | {r['torch_cpu']:.0f} "
+            f"| {r['numba_cpu']:.0f} | {r['numba_1t']:.1f} | {r['torch_ms']:.0f} | {r['torch_cpu']:.0f} "
             f"| {r['torch_ms'] / r['numba_ms']:.0f}x | {r['numba_mib']:.0f} MiB "
             f"| {r['rss_numba']:.0f} / {r['rss_torch']:.0f} MiB | {r['agree']:.1e} |"
         )
@@ -221,4 +230,4 @@ def report(rows: list[dict], note: str, args: argparse.Namespace) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -30,7 +30,8 @@ def _p2f_distance(w: torch.Tensor, xp: torch.Tensor, yp: torch.Tensor, f: torch.
     obt = [0, 0, 0]
     for k in range(3):
         k1, k2 = (k + 1) % 3, (k + 2) % 3
-        if float(((f[k1, 0] - f[k, 0]) * (f[k2, 0] - f[k, 0]) + (f[k1, 1] - f[k, 1]) * (f[k2, 1] - f[k, 1])).detach()) < 0:
+        dot = (f[k1, 0] - f[k, 0]) * (f[k2, 0] - f[k, 0]) + (f[k1, 1] - f[k, 1]) * (f[k2, 1] - f[k, 1])
+        if float(dot.detach()) < 0:
             obt[k] = 1
             break
 

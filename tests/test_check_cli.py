@@ -227,3 +227,11 @@ def test_check_starts_without_torch(files: dict[str, Path]) -> None:
     assert proc.returncode == 0, err[-3000:]
     imported = {line.split("|")[-1].strip() for line in err.splitlines() if line.startswith("import time:")}
     assert "saucerfab.check" in imported and "torch" not in imported
+
+
+def test_readme_lists_every_finding_code() -> None:
+    from saucerfab.check import CODES
+
+    text = (Path(__file__).resolve().parents[1] / "saucerfab" / "check" / "README.md").read_text()
+    for code, (kind, meaning) in CODES.items():
+        assert f"| `{code}` | {kind} | {meaning} |" in text, code

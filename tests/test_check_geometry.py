@@ -120,13 +120,16 @@ def test_first_hits_equal_brute_force() -> None:
             assert ref_ray_triangle(o[r], d[r], tri[hit[r]]) == pytest.approx(best, rel=1e-9)
 
 
-def test_threads_give_the_same_answers() -> None:
-    V, F, _ = saucer_solid(100)  # ~39,000 triangles: deep enough frontiers to be split
+def test_pair_chunks_and_ray_threads_give_the_same_answers() -> None:
+    V, F, _ = saucer_solid(100)  # ~39,000 triangles
     tri = V[F]
     bvh = BVH.build(tri)
-    i1, j1, c1 = bvh.overlapping_pairs(tol=1e-7, budget=10**9, workers=1)
-    i2, j2, c2 = bvh.overlapping_pairs(tol=1e-7, budget=10**9, workers=3)
-    assert c1 and c2 and len(i1) > 100_000
+    i1, j1, c1 = bvh.overlapping_pairs(tol=1e-7, budget=10**9)
+    small = list(bvh.pair_chunks(tol=1e-7, budget=10**9, chunk=4096))
+    assert c1 and bvh.pairs_complete and len(i1) > 100_000 and len(small) > 20
+    assert max(len(p[0]) for p in small) <= 4096
+    i2, j2 = np.concatenate([p[0] for p in small]), np.concatenate([p[1] for p in small])
+    assert len(i2) == len(i1)
     assert set(zip(i1.tolist(), j1.tolist())) == set(zip(i2.tolist(), j2.tolist()))
     rng = np.random.default_rng(9)
     o = rng.random((3000, 3)) * [100, 100, 7]

@@ -13,6 +13,7 @@ from saucerfab.errors import MeshError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.profiles import load_profile
 from saucerfab.fabricate.solid import (
+    OUTLINE_EPS_MM,
     Solid,
     block_mesh,
     boundary_loop,
@@ -20,9 +21,11 @@ from saucerfab.fabricate.solid import (
     canonical_order,
     check_features,
     crest_widths,
+    footprint_on_clipper_grid,
+    snap_to_footprint,
 )
-from saucerfab.heightfield import triangulate
-from saucerfab.scene import EllipseCup, PrismCup, Scene
+from saucerfab.heightfield import make_grid, triangulate
+from saucerfab.scene import CircleCup, EllipseCup, PrismCup, Saucer, Scene
 
 
 def flat_design(n: int = 12, scene: Scene | None = None) -> Design:
@@ -232,6 +235,194 @@ def test_bad_scale_is_refused() -> None:
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(MeshError, match="mm_per_unit"):
             build_solid(d, bad)
+
+
+# --------------------------------------------------------------------------- seat against the block
+#
+# Regressions: the seat's 2-D outlines (manifold3d CrossSection = Clipper2) are
+# rounded onto a ~7.5 nm grid. Unless the block's border sits on that grid and
+# edge crossings are snapped, the plate lies nanometres into the saucer (a
+# sliver over its top, vertices that round onto one position) or beside it
+# (the part falls apart). Scales like 88.89 mm per unit (an 80 mm prism cup of
+# circumradius 0.45) and wide saucers exposed it.
+
+WIDE = Saucer((-1.0, 1.0), (-1.5, -0.5), 24, 0.05)
+
+SEAT_SCENES = {
+    "prism-wide": Scene(cup=PrismCup(6, 0.45, -90.0), saucer=WIDE),  # 88.89 mm/unit: the reported design
+    "prism7-wide": Scene(cup=PrismCup(7, 0.45, 0.0), saucer=WIDE),  # round joins leave 10 nm vertex pairs
+    "ellipse-wide": Scene(cup=EllipseCup((0.45, 0.35), 30.0), saucer=WIDE, cup_diameter_mm=77.0),
+    "circle-wide": Scene(cup=CircleCup(0.37), saucer=WIDE),  # 108.1 mm/unit
+    "circle-default": Scene(cup=CircleCup(0.37)),
+    "circle-paper": Scene(),  # 100 mm/unit: the footprint lies on the grid anyway
+}
+
+
+def assert_one_printable_body(s: Solid) -> None:
+    """Closed 2-manifold, no two vertices at one position, one body, positive volume (also per trimesh)."""
+    import trimesh
+
+    assert_closed_manifold(s)
+    m = trimesh.Trimesh(s.vertices, s.faces, process=False)
+    assert m.is_watertight and m.is_winding_consistent
+    assert m.body_count == 1
+    assert s.volume_mm3 > 0 and m.volume == pytest.approx(s.volume_mm3, rel=1e-9)
+
+
+def assert_top_is_the_heightfield(s: Solid, n: int) -> None:
+    """The marked top faces cover exactly the designed heightfield: inside the footprint, same area, facing up."""
+    t = s.vertices[s.faces[s.is_top]]
+    (x0, x1), (y0, y1) = s.footprint
+    cen = t.mean(axis=1)
+    assert ((cen[:, 0] > x0) & (cen[:, 0] < x1) & (cen[:, 1] > y0) & (cen[:, 1] < y1)).all()
+    assert (np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])[:, 2] > 0).all()
+    gx, gy = np.meshgrid(s.grid_x, s.grid_y)
+    g = np.stack([gx.ravel(), gy.ravel(), s.heights.ravel()], 1)[triangulate(n)]
+    area = lambda q: 0.5 * np.linalg.norm(np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), axis=1).sum()  # noqa: E731
+    assert area(t) == pytest.approx(area(g), rel=1e-6)  # coordinates are rounded to 10 nm
+    # every top vertex is a grid vertex at its designed height, or lies on the border (where the
+    # seat may split a top triangle's outer edge)
+    v = t.reshape(-1, 3)
+    j, i = np.searchsorted(s.grid_x, v[:, 0]), np.searchsorted(s.grid_y, v[:, 1])
+    on_grid = (j < s.grid_x.size) & (i < s.grid_y.size)
+    j, i = np.minimum(j, s.grid_x.size - 1), np.minimum(i, s.grid_y.size - 1)
+    on_grid &= (s.grid_x[j] == v[:, 0]) & (s.grid_y[i] == v[:, 1])
+    assert (v[on_grid, 2] == s.heights[i[on_grid], j[on_grid]]).all()
+    border = np.isin(v[:, 0], (x0, x1)) | np.isin(v[:, 1], (y0, y1))
+    assert (on_grid | border).all()
+
+
+def assert_seat_probes(s: Solid, scene: Scene, o: FabOptions) -> None:
+    """Pocket floor on the standing plane at the cup's axis; rim / ring top just outside, away from the saucer."""
+    cx, cy = s.seat.center_xy
+    assert top_z(s, cx, cy) == pytest.approx(s.seat.floor_z, abs=1e-5)
+    reach = float(scene.cup.boundary(256)[:, 1].max()) * scene.mm_per_unit  # type: ignore[attr-defined]
+    rim_y = cy + reach + o.seat_clearance_mm + 0.5 * o.seat_rim_mm
+    want = s.seat.floor_z + (o.seat_depth_mm if o.seat == "ring" else 0.0)
+    assert top_z(s, cx, rim_y) == pytest.approx(s.seat.top_z if o.seat == "recess" else want, abs=1e-5)
+
+
+@pytest.mark.parametrize("seat", ["recess", "ring", "none"])
+@pytest.mark.parametrize("name", sorted(SEAT_SCENES))
+def test_seat_meets_the_saucer_without_slivers_or_gaps(name: str, seat: str) -> None:
+    scene = SEAT_SCENES[name]
+    d = synthetic_design(scene, resolution=16, texture_size=32, seed=1)
+    o = FabOptions(seat=seat)  # type: ignore[arg-type]
+    s = build_solid(d, scene.mm_per_unit, o)
+    assert_one_printable_body(s)
+    assert_top_is_the_heightfield(s, 16)
+    if seat != "none":
+        assert_seat_probes(s, scene, o)
+        assert s.seat.top_z - s.seat.floor_z == pytest.approx(o.seat_depth_mm)
+
+
+def test_wide_prism_design_is_reproducible() -> None:
+    scene = SEAT_SCENES["prism-wide"]
+    d = synthetic_design(scene, resolution=16, texture_size=32)
+    a = build_solid(d, scene.mm_per_unit, FabOptions())
+    b = build_solid(d, scene.mm_per_unit, FabOptions())
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.faces, b.faces)
+    np.testing.assert_array_equal(a.is_top, b.is_top)
+
+
+@pytest.mark.parametrize("seat", ["recess", "ring"])
+@pytest.mark.parametrize("mm_exact", [True, False])
+def test_back_edge_above_below_and_on_the_seat_top(seat: str, mm_exact: bool) -> None:
+    """The saucer's back edge alternates above, below and exactly at the plate's top."""
+    if mm_exact:  # 128 mm per unit: heights * scale hit the plate top bit for bit
+        scene = Scene(cup=PrismCup(6, 0.4375, -90.0), saucer=WIDE, cup_diameter_mm=112.0)
+    else:
+        scene = SEAT_SCENES["prism-wide"]
+    n = 16
+    d = synthetic_design(scene, resolution=n, texture_size=32, seed=4)
+    mm = scene.mm_per_unit
+    o = FabOptions(seat=seat)  # type: ignore[arg-type]
+    plate_top = o.seat_depth_mm if seat == "recess" else 0.0
+    h = np.clip(d.heights, -0.5 / mm, None)  # keep the bottom at -base_thickness: plate top exact
+    h[-1] = plate_top / mm + np.resize([2.0, -2.0, 0.0, 0.3, 0.0, -0.3], n) / mm
+    h[-2] = plate_top / mm + np.resize([0.0, 1.0, -1.0], n) / mm
+    s = build_solid(replace(d, heights=h), mm, o)
+    assert_one_printable_body(s)
+    assert_top_is_the_heightfield(s, n)
+    assert_seat_probes(s, scene, o)
+    # just behind the back edge (beside the ring / pocket) the plate's top; just in front of it the saucer
+    (x0, x1), (_, y1) = s.footprint
+    beside = scene.cup.circumradius * mm + o.seat_clearance_mm + o.seat_rim_mm + 1.0
+    cx = s.seat.center_xy[0]
+    xs = np.concatenate([np.linspace(x0 + 1.0, cx - beside, 4), np.linspace(cx + beside, x1 - 1.0, 4)])
+    for x in xs:
+        behind = top_z(s, x, y1 + 1e-3)
+        assert behind == pytest.approx(s.seat.top_z if seat == "recess" else s.seat.floor_z, abs=1e-5)
+        j = np.searchsorted(s.grid_x, x) - 1
+        t = (x - s.grid_x[j]) / (s.grid_x[j + 1] - s.grid_x[j])
+        edge = (1 - t) * s.heights[-1, j] + t * s.heights[-1, j + 1]
+        assert top_z(s, x, y1 - 1e-6) == pytest.approx(edge, abs=1e-4)
+
+
+def test_clipped_seat_against_the_saucer_is_one_clean_body() -> None:
+    """The clearance outline reaches into the saucer's footprint: the seat is clipped there, still one body."""
+    scene = Scene(saucer=Saucer((-0.6, 0.7), (-1.4, -0.403), 16, 0.05), cup_diameter_mm=77.0)
+    d = synthetic_design(scene, resolution=16, texture_size=32)
+    for seat in ("recess", "ring"):
+        s = build_solid(d, scene.mm_per_unit, FabOptions(seat=seat))  # type: ignore[arg-type]
+        assert any("clipped" in w for w in s.warnings)
+        assert_one_printable_body(s)
+        assert_top_is_the_heightfield(s, 16)
+
+
+def test_ring_crossing_the_saucer_side_is_snapped_onto_it() -> None:
+    """A ring outline crossing the saucer's side wall: Clipper rounds that crossing a grid step off the wall."""
+    scene = Scene(
+        cup=PrismCup(5, 0.4685, 80.92), saucer=Saucer((-0.44, 0.145), (-0.94, -0.416), 12, 0.05), cup_diameter_mm=101.88
+    )
+    d = synthetic_design(scene, resolution=12, texture_size=32)
+    d = replace(d, heights=np.zeros((12, 12)))  # the saucer's top is the ring's base plane
+    o = FabOptions(seat="ring", seat_depth_mm=1.4, seat_clearance_mm=0.3, seat_rim_mm=5.7)
+    s = build_solid(d, scene.mm_per_unit, o)
+    assert_one_printable_body(s)
+
+
+def test_footprint_is_put_on_the_cross_section_grid() -> None:
+    import manifold3d as m3d
+
+    scene = SEAT_SCENES["prism-wide"]
+    grid = make_grid(scene.saucer)
+    xs0, ys0 = grid.xs * scene.mm_per_unit, grid.ys * scene.mm_per_unit
+    fp, xs, ys = footprint_on_clipper_grid(xs0, ys0)
+    assert np.abs(xs - xs0).max() < 1e-8 and np.abs(ys - ys0).max() < 1e-8
+    np.testing.assert_array_equal(xs[1:-1], xs0[1:-1])
+    np.testing.assert_array_equal(ys[1:-1], ys0[1:-1])
+    assert (ys0[-1] != ys[-1]) or (xs0[0] != xs[0])  # this scale is off the grid: something moved
+    # the rounding is idempotent: the plate's edges along the footprint are the block's border, bit for bit
+    assert m3d.CrossSection(fp.to_polygons()).bounds() == fp.bounds()
+    plate = m3d.CrossSection.batch_hull([m3d.CrossSection.circle(44.5, 97), fp]) - fp
+    p = np.concatenate(plate.to_polygons())
+    near = np.abs(p[:, 1] - ys[-1]) < 1e-6
+    assert near.sum() >= 2 and (p[near, 1] == ys[-1]).all()
+    assert set(p[near, 0].tolist()) >= {xs[0], xs[-1]}
+
+
+def test_snap_to_footprint_moves_only_points_on_the_border() -> None:
+    xs, ys = np.array([0.0, 1.0, 10.0]), np.array([-5.0, 0.0, 5.0])
+    e = 0.5 * OUTLINE_EPS_MM
+    pts = np.array(
+        [
+            [10.0 - e, 2.0, 1.0],  # on the right edge: snapped
+            [e, -5.0 + e, 0.0],  # at a corner: both snapped
+            [3.0, 5.0 + e, 0.0],  # on the back edge: snapped
+            [10.0 - e, 9.0, 0.0],  # on the line x = x1 but beyond the corner: kept
+            [5.0, 2.0 + e, 0.0],  # inside: kept
+            [10.0 - 3 * OUTLINE_EPS_MM, 2.0, 0.0],  # farther than the tolerance: kept
+        ]
+    )
+    q = snap_to_footprint(pts, xs, ys)
+    want = pts.copy()
+    want[0, 0] = 10.0
+    want[1, :2] = (0.0, -5.0)
+    want[2, 1] = 5.0
+    np.testing.assert_array_equal(q, want)
+    assert pts[0, 0] == 10.0 - e  # a copy
 
 
 # --------------------------------------------------------------------------- thin walls and features

@@ -63,6 +63,10 @@ def occlusion_scene():
 SETTINGS = [
     dict(sigma=3e-3, gamma=1e-3, background=(0.2, 0.5, 0.9)),  # wide coverage, soft depth
     dict(sigma=2e-4, gamma=1e-4, background=(0.0, 0.0, 0.0)),  # SoftRas default gamma
+    # far just behind the faces (depths 5..5.35): normalized inverse depths near eps,
+    # so the background weight exp((2 eps - m)/gamma) competes with the faces, and
+    # parts of faces beyond far leave the colour but not alpha
+    dict(sigma=1e-3, gamma=1e-2, eps=1e-2, near=4.9, far=5.3, background=(0.3, 0.6, 0.1)),
 ]
 
 
@@ -231,6 +235,7 @@ def test_gpu_dispatch_matches_cpu() -> None:
     "change, match",
     [
         (dict(vertices=torch.zeros(3, 2)), "vertices"),
+        (dict(vertices=torch.zeros(3, 3, dtype=torch.float16)), "float32 or float64"),
         (dict(faces=torch.tensor([[0, 1, 5]])), "index"),
         (dict(faces=torch.zeros(1, 3)), "integer"),
         (dict(face_colors=torch.zeros(2, 3)), "face_colors"),

@@ -63,7 +63,8 @@ def test_matches_ray_casting_on_the_paper_saucer() -> None:
     cam = Camera.from_scene(Scene(), "direct").with_size(48)
     _compare(v, f, cam)
     # the mirrored saucer (flipped winding) is drawn as well
-    _compare(v * np.array([1.0, -1.0, 1.0]) + np.array([0.0, -0.8, 0.0]), f, Camera.from_scene(Scene(), "reflected").with_size(48))
+    mirrored = v * np.array([1.0, -1.0, 1.0]) + np.array([0.0, -0.8, 0.0])
+    _compare(mirrored, f, Camera.from_scene(Scene(), "reflected").with_size(48))
 
 
 def test_closed_grid_has_no_cracks_and_takes_torch() -> None:
@@ -148,15 +149,18 @@ def test_textured_uint8_matches_float() -> None:
     assert a.min() >= 0 and a.max() <= 1
 
 
+V3, F1 = np.zeros((3, 3)), np.array([[0, 1, 2]])
+
+
 @pytest.mark.parametrize(
     "call, match",
     [
-        (lambda cam: rasterize_hard(np.zeros((3, 2)), np.array([[0, 1, 2]]), cam), "vertices"),
-        (lambda cam: rasterize_hard(np.zeros((3, 3)), np.array([[0, 1, 3]]), cam), "index"),
-        (lambda cam: rasterize_hard(np.zeros((3, 3)), np.array([[0, 1, 2]]), cam, image_size=0), "image_size"),
-        (lambda cam: render_face_colors_hard(np.zeros((3, 3)), np.array([[0, 1, 2]]), np.zeros((2, 3)), cam), "face_colors"),
-        (lambda cam: render_textured(np.zeros((3, 3)), np.array([[0, 1, 2]]), np.zeros((1, 3)), np.zeros((2, 2, 3)), cam), "face_uvs"),
-        (lambda cam: render_textured(np.zeros((3, 3)), np.array([[0, 1, 2]]), np.zeros((1, 3, 2)), np.zeros((2, 2)), cam), "texture"),
+        (lambda cam: rasterize_hard(np.zeros((3, 2)), F1, cam), "vertices"),
+        (lambda cam: rasterize_hard(V3, np.array([[0, 1, 3]]), cam), "index"),
+        (lambda cam: rasterize_hard(V3, F1, cam, image_size=0), "image_size"),
+        (lambda cam: render_face_colors_hard(V3, F1, np.zeros((2, 3)), cam), "face_colors"),
+        (lambda cam: render_textured(V3, F1, np.zeros((1, 3)), np.zeros((2, 2, 3)), cam), "face_uvs"),
+        (lambda cam: render_textured(V3, F1, np.zeros((1, 3, 2)), np.zeros((2, 2)), cam), "texture"),
     ],
 )
 def test_bad_arguments(call, match: str) -> None:  # type: ignore[no-untyped-def]

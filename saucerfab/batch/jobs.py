@@ -304,16 +304,20 @@ def _emit(payload: Payload, stage: str) -> None:
         pass
 
 
-def _limit_threads(n: int, need_torch: bool) -> None:
+def _limit_threads(n: int, need_torch: bool) -> int | None:
     """One job, ``n`` torch threads: workers run side by side without oversubscribing
-    the cores, and a design does not depend on the machine's core count."""
+    the cores, and a design does not depend on the machine's core count.
+    Returns the previous count (None if torch is not in use)."""
     import sys
 
-    if need_torch or "torch" in sys.modules:
-        import torch
+    if not (need_torch or "torch" in sys.modules):
+        return None
+    import torch
 
-        if torch.get_num_threads() != n:
-            torch.set_num_threads(n)
+    before = torch.get_num_threads()
+    if before != n:
+        torch.set_num_threads(n)
+    return before
 
 
 def _collect(folder: Path, prefix: str) -> dict[str, bytes]:
@@ -476,7 +480,7 @@ def execute(payload: Payload) -> JobResult:
     t0 = time.perf_counter()
     times: dict[str, float] = {}
     stage = ["inputs"]
-    _limit_threads(payload.threads, payload.kind == "raw")
+    threads_before = _limit_threads(payload.threads, payload.kind == "raw")
     root = payload.scratch_root
     if root is not None:
         Path(root).mkdir(parents=True, exist_ok=True)
@@ -500,8 +504,14 @@ def execute(payload: Payload) -> JobResult:
         )
     finally:
         shutil.rmtree(work, ignore_errors=True)
+        if threads_before is not None and threads_before != payload.threads:
+            import torch  # give a caller's process (--workers 0, a threaded Dask worker) its setting back
+
+            torch.set_num_threads(threads_before)
     if res.reason:
         res.reason = _user_paths(res.reason, payload, work)
+    if res.trace:
+        res.trace = _user_paths(res.trace, payload, work)
     times["total"] = time.perf_counter() - t0
     res.times = {k: round(v, 4) for k, v in times.items()}
     res.worker = f"{socket.gethostname()}:{os.getpid()}"

@@ -205,7 +205,7 @@ def run_batch(
         engine_name = engine.name
         try:
             _drive(manifest, out, engine, outcomes, display, force, threads_per_job, report)
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, Interrupted):  # Ctrl-C, SIGTERM (CLI), or a stage's own Interrupted
             state["name"] = "interrupted"
             engine.close(cancel=True)
             display.close()

@@ -15,7 +15,8 @@ the tests.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -53,6 +54,7 @@ class BVH:
     hi: list[np.ndarray]
     leaf_tri: np.ndarray  # (2**D,) triangle index per leaf, -1 for padding
     depth: int
+    pairs_complete: bool = field(default=True, compare=False)
 
     @classmethod
     def build(cls, tri: np.ndarray) -> BVH:
@@ -176,77 +178,61 @@ class BVH:
         return best, hit, all(done)
 
     # ---- pairs ------------------------------------------------------------
-    def overlapping_pairs(self, tol: float, budget: int, workers: int = 1) -> tuple[np.ndarray, np.ndarray, bool]:
-        """Triangle pairs (i < j by leaf) whose boxes overlap (padded by ``tol``).
+    def pair_chunks(self, tol: float, budget: int, chunk: int = 1 << 20) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """Triangle pairs (i, j) whose boxes overlap (padded by ``tol``), in chunks of at most ~``chunk``.
 
-        Returns (i, j, complete). Work stays within about ``budget`` node-pair
-        tests: where a level's frontier would exceed its share, a fixed
-        random sample of it goes on, and ``complete`` is False (the pairs
-        returned are then a sample). With ``workers`` > 1 the deep levels,
-        where the work is, run in threads on slices of the frontier (numpy
-        releases the GIL in its loops).
+        Depth-first over slices of the frontier, so memory stays at a few
+        chunks whatever the mesh size, and the caller can test each chunk
+        while the search goes on. Work stays near ``budget`` node-pair
+        tests: past it, each expansion goes on with a fixed random sixteenth
+        of its children, so a pile of overlapping triangles still yields some
+        of its crossings in bounded time. ``self.pairs_complete`` tells
+        afterwards whether the search was exhaustive.
         """
-        a = np.zeros(1, dtype=np.int64)
-        b = np.zeros(1, dtype=np.int64)
-        d = 0
-        used = 0
-        complete = True
-        # the top levels serially, until the frontier is worth splitting
-        while d < self.depth and (workers <= 1 or len(a) < 16384):
-            a, b, u, ok = self._descend(a, b, d, d + 1, budget - used, 0, tol)
-            d += 1
-            used += u
-            complete &= ok
-            if not len(a):
-                break
-        if d < self.depth and len(a):
-            from concurrent.futures import ThreadPoolExecutor
-
-            cuts = np.linspace(0, len(a), workers + 1).astype(int)
-            left = budget - used
-            jobs = [(a[i:j], b[i:j], d, self.depth, max(1000, left * (j - i) // len(a)), k, tol)
-                    for k, (i, j) in enumerate(zip(cuts[:-1], cuts[1:]))]
-            with ThreadPoolExecutor(max_workers=workers) as ex:
-                parts = list(ex.map(lambda job: self._descend(*job), jobs))
-            a = np.concatenate([p[0] for p in parts])
-            b = np.concatenate([p[1] for p in parts])
-            complete &= all(p[3] for p in parts)
-        keep = a != b
-        ti, tj = self.leaf_tri[a[keep]], self.leaf_tri[b[keep]]
-        ok = (ti >= 0) & (tj >= 0)
-        return ti[ok], tj[ok], complete
-
-    def _descend(self, a: np.ndarray, b: np.ndarray, d0: int, d1: int, budget: int, seed: int, tol: float
-                 ) -> tuple[np.ndarray, np.ndarray, int, bool]:
-        """Overlapping node pairs (a, b) at level d0 -> those at level d1; (a, b, tests used, complete)."""
-        used = 0
-        complete = True
-        rng = np.random.default_rng(seed)
+        self.pairs_complete = True
+        rng = np.random.default_rng(0)
         same_kids = (np.array([0, 0, 1]), np.array([0, 1, 1]))
         diff_kids = (np.array([0, 0, 1, 1]), np.array([0, 1, 0, 1]))
-        for d in range(d0 + 1, d1 + 1):
+        stack: list[tuple[np.ndarray, np.ndarray, int]] = [(np.zeros(1, np.int64), np.zeros(1, np.int64), 0)]
+        used = 0
+        while stack:
+            a, b, d = stack.pop()
+            if d == self.depth:
+                keep = a != b
+                ti, tj = self.leaf_tri[a[keep]], self.leaf_tri[b[keep]]
+                ok = (ti >= 0) & (tj >= 0)
+                if ok.any():
+                    yield ti[ok], tj[ok]
+                continue
+            if 4 * len(a) > chunk:  # expanding would make a big array: halve, depth first
+                h = len(a) // 2
+                stack.append((a[h:], b[h:], d))
+                stack.append((a[:h], b[:h], d))
+                continue
             same = a == b
             # children of (a, a): (2a,2a), (2a,2a+1), (2a+1,2a+1); of (a, b), a<b: all four
             sa, da, db = 2 * a[same], 2 * a[~same], 2 * b[~same]
             a2 = np.concatenate([(sa[:, None] + same_kids[0]).ravel(), (da[:, None] + diff_kids[0]).ravel()])
             b2 = np.concatenate([(sa[:, None] + same_kids[1]).ravel(), (db[:, None] + diff_kids[1]).ravel()])
-            # over budget: go on with a fixed random sample of the frontier, so a pile of overlapping
-            # triangles still yields some of its crossings in bounded time (and says it is partial)
-            share = max(1000, (budget - used) // (4 * (self.depth - d + 1)))
-            if len(a2) > share:
-                keep = np.sort(rng.choice(len(a2), size=share, replace=False))
+            if used > budget and len(a2) > 16:
+                keep = np.sort(rng.choice(len(a2), size=max(16, len(a2) // 16), replace=False))
                 a2, b2 = a2[keep], b2[keep]
-                complete = False
+                self.pairs_complete = False
             used += len(a2)
-            lo, hi = self.lo[d], self.hi[d]
+            lo, hi = self.lo[d + 1], self.hi[d + 1]
             ov = np.ones(len(a2), dtype=bool)
             for ax in range(3):
                 la, ha, lb, hb = lo[ax, a2], hi[ax, a2], lo[ax, b2], hi[ax, b2]
                 ov &= (la <= hb + tol) & (lb <= ha + tol)
-            a, b = a2[ov], b2[ov]
-            if not len(a):
-                break
-        return a, b, used, complete
+            if ov.any():
+                stack.append((a2[ov], b2[ov], d + 1))
+
+    def overlapping_pairs(self, tol: float, budget: int) -> tuple[np.ndarray, np.ndarray, bool]:
+        """All of :meth:`pair_chunks` at once: (i, j, complete)."""
+        parts = list(self.pair_chunks(tol, budget))
+        if not parts:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), self.pairs_complete
+        return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]), self.pairs_complete)
 
 
 def ray_triangle(o: np.ndarray, d: np.ndarray, tri: np.ndarray) -> np.ndarray:
@@ -290,27 +276,38 @@ def segment_hits_triangle(p: np.ndarray, q: np.ndarray, tri: np.ndarray, eps_d: 
     return cross & inside & (nn > 0)
 
 
+def _project2(P: np.ndarray, drop: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """2D coordinates of points P (n, 3) with the axis ``drop`` (n,) removed (x, y of the rest, in order)."""
+    keep = np.array([[1, 2], [0, 2], [0, 1]])[drop]
+    rows = np.arange(len(P))
+    return P[rows, keep[:, 0]], P[rows, keep[:, 1]]
+
+
 def _coplanar_overlap(A: np.ndarray, B: np.ndarray, nrm: np.ndarray, eps: float) -> np.ndarray:
     """Coplanar triangle pairs whose interiors overlap: no separating axis among the 6 edge normals.
 
-    Triangles are convex, so they overlap iff no in-plane edge normal
-    separates their projections; touching (projections meeting within
-    ``eps``) counts as separated. Axes are tried one by one on the pairs
-    still overlapping, so well-apart neighbours leave after one or two.
+    Done in 2D (the plane projected along the normal's largest axis):
+    triangles are convex, so they overlap iff no edge normal separates their
+    projections; touching (within ``eps``) counts as separated. Axes are
+    tried one by one on the pairs still overlapping, so well-apart
+    neighbours leave after one or two.
     """
+    drop = np.argmax(np.abs(nrm), axis=1)
+    ax_, ay_ = zip(*(_project2(A[:, c], drop) for c in range(3)))
+    bx_, by_ = zip(*(_project2(B[:, c], drop) for c in range(3)))
+    ax, ay, bx, by = np.stack(ax_), np.stack(ay_), np.stack(bx_), np.stack(by_)  # (3, n)
     idx = np.arange(len(A))
-    for tri_, c in [(A, 0), (A, 1), (A, 2), (B, 0), (B, 1), (B, 2)]:
+    for px, py, c in [(ax, ay, 0), (ax, ay, 1), (ax, ay, 2), (bx, by, 0), (bx, by, 1), (bx, by, 2)]:
         if not len(idx):
             break
-        edge = tri_[idx, (c + 1) % 3] - tri_[idx, c]
-        axis = cross3(nrm[idx], edge)
-        la = np.sqrt(dot3(axis, axis))
-        pa = [dot3(A[idx, j], axis) for j in range(3)]
-        pb = [dot3(B[idx, j], axis) for j in range(3)]
-        amin, amax = np.minimum(np.minimum(pa[0], pa[1]), pa[2]), np.maximum(np.maximum(pa[0], pa[1]), pa[2])
-        bmin, bmax = np.minimum(np.minimum(pb[0], pb[1]), pb[2]), np.maximum(np.maximum(pb[0], pb[1]), pb[2])
+        ex = px[(c + 1) % 3, idx] - px[c, idx]
+        ey = py[(c + 1) % 3, idx] - py[c, idx]
+        nx, ny = -ey, ex  # the edge's normal in the plane
+        la = np.sqrt(nx * nx + ny * ny)
+        pa = ax[:, idx] * nx + ay[:, idx] * ny
+        pb = bx[:, idx] * nx + by[:, idx] * ny
         tol = eps * la
-        sep = (amax <= bmin + tol) | (bmax <= amin + tol) | (la == 0)
+        sep = (pa.max(axis=0) <= pb.min(axis=0) + tol) | (pb.max(axis=0) <= pa.min(axis=0) + tol) | (la == 0)
         idx = idx[~sep]
     out = np.zeros(len(A), dtype=bool)
     out[idx] = True
@@ -320,19 +317,36 @@ def _coplanar_overlap(A: np.ndarray, B: np.ndarray, nrm: np.ndarray, eps: float)
 def tri_tri_intersect(A: np.ndarray, B: np.ndarray, fa: np.ndarray, fb: np.ndarray, eps_d: float) -> np.ndarray:
     """Which triangle pairs (A[k], B[k]) cross each other; ``fa``, ``fb`` are their vertex indices.
 
+    The pairwise form of :func:`pair_intersections` (for tests and small uses).
+    """
+    n = len(A)
+    tri = np.concatenate([A, B]).astype(np.float64)
+    fv = np.concatenate([fa, fb])
+    nrm = cross3(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    return pair_intersections(tri, fv, nrm, np.arange(n), np.arange(n, 2 * n), eps_d)
+
+
+def pair_intersections(tri: np.ndarray, fv: np.ndarray, nrm: np.ndarray, a: np.ndarray, b: np.ndarray,
+                       eps_d: float) -> np.ndarray:
+    """Which candidate pairs (tri[a[k]], tri[b[k]]) cross each other.
+
+    ``fv`` are the triangles' (welded) vertex indices and ``nrm`` their
+    normals (any length; zero for degenerate triangles, which never count).
     Sharing a vertex or an edge is not an intersection, crossing elsewhere
     is, and merely touching is not. Non-coplanar pairs intersect iff an edge
     of one crosses the other (the ends of the intersection segment lie on
     edges). Coplanar pairs: sharing no vertex, a separating-axis test in the
-    plane; sharing one, whether their corners' sectors at it overlap; sharing
-    an edge, whether they fold onto the same side of it. Tests run from
-    cheapest to dearest on a shrinking set of pairs, since most candidate
-    pairs in a mesh are neighbours that a plane test alone clears.
+    plane; sharing one, whether their corners' sectors at it overlap;
+    sharing an edge, whether they fold onto the same side of it. Tests run
+    from cheapest to dearest on a shrinking set of pairs, and coordinates
+    are gathered only for the pairs a test needs, since most candidates in
+    a mesh are neighbours that one plane test clears.
     """
-    n = len(A)
+    n = len(a)
     out = np.zeros(n, dtype=bool)
     if n == 0:
         return out
+    fa, fb = fv[a], fv[b]
     inA = np.zeros((n, 3), dtype=bool)
     inB = np.zeros((n, 3), dtype=bool)
     for i in range(3):
@@ -341,54 +355,49 @@ def tri_tri_intersect(A: np.ndarray, B: np.ndarray, fa: np.ndarray, fb: np.ndarr
             inA[:, i] |= e
             inB[:, j] |= e
     shared = inA.sum(axis=1)
-    nA = cross3(A[:, 1] - A[:, 0], A[:, 2] - A[:, 0])
-    lenA = np.sqrt(dot3(nA, nA))
-    ok = lenA > 0
+    nlen = np.sqrt(dot3(nrm, nrm))
+    ok = (nlen[a] > 0) & (nlen[b] > 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit = nrm / nlen[:, None]
 
     # sharing an edge: only coplanar folds can overlap
-    e2 = np.flatnonzero((shared == 2) & ok)
-    if len(e2):
-        lone = B[e2, np.argmin(inB[e2], axis=1)]  # B's corner off the shared edge
-        cop = np.abs(dot3(lone - A[e2, 0], nA[e2])) <= eps_d * lenA[e2]
-        k = e2[cop]
-        if len(k):
-            out[k] = _folded(A[k], nA[k], inA[k], lone[cop], eps_d)
+    k = np.flatnonzero((shared == 2) & ok)
+    if len(k):
+        lone = tri[b[k], np.argmin(inB[k], axis=1)]  # B's corner off the shared edge
+        cop = np.abs(dot3(lone - tri[a[k], 0], unit[a[k]])) <= eps_d
+        if cop.any():
+            kk = k[cop]
+            out[kk] = _folded(tri[a[kk]], nrm[a[kk]], inA[kk], lone[cop], eps_d)
 
-    # sharing one vertex or none: B against A's plane first
+    # sharing one vertex or none: B's corners against A's plane first
     k = np.flatnonzero((shared < 2) & ok)
     if not len(k):
         return out
-    un = nA[k] / lenA[k][:, None]
-    a0 = A[k, 0]
-    dB = [dot3(B[k, c] - a0, un) for c in range(3)]
+    ua, a0 = unit[a[k]], tri[a[k], 0]
+    dB = [dot3(tri[b[k], c] - a0, ua) for c in range(3)]
     coplanar = (np.abs(dB[0]) <= eps_d) & (np.abs(dB[1]) <= eps_d) & (np.abs(dB[2]) <= eps_d)
     cop = k[coplanar]
-    live = ~coplanar & ~_separated(dB, eps_d)
-    k = k[live]
+    k = k[~coplanar & ~_separated(dB, eps_d)]
     if len(k):
-        nB = cross3(B[k, 1] - B[k, 0], B[k, 2] - B[k, 0])
-        lB = np.sqrt(dot3(nB, nB))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ub = nB / lB[:, None]
-        b0 = B[k, 0]
-        dA = [dot3(A[k, c] - b0, ub) for c in range(3)]
-        k = k[(lB > 0) & ~_separated(dA, eps_d)]
+        ub, b0 = unit[b[k]], tri[b[k], 0]
+        dA = [dot3(tri[a[k], c] - b0, ub) for c in range(3)]
+        k = k[~_separated(dA, eps_d)]
     if len(k):
-        a, b = A[k], B[k]
+        A, B = tri[a[k]], tri[b[k]]
         hitk = np.zeros(len(k), dtype=bool)
         for c in range(3):
-            hitk |= segment_hits_triangle(a[:, c], a[:, (c + 1) % 3], b, eps_d)
-            hitk |= segment_hits_triangle(b[:, c], b[:, (c + 1) % 3], a, eps_d)
+            hitk |= segment_hits_triangle(A[:, c], A[:, (c + 1) % 3], B, eps_d)
+            hitk |= segment_hits_triangle(B[:, c], B[:, (c + 1) % 3], A, eps_d)
         out[k] = hitk
     if len(cop):
         c0 = cop[shared[cop] == 0]
         if len(c0):
-            out[c0] = _coplanar_overlap(A[c0], B[c0], nA[c0], eps_d)
+            out[c0] = _coplanar_overlap(tri[a[c0]], tri[b[c0]], nrm[a[c0]], eps_d)
         c1 = cop[shared[cop] == 1]
         if len(c1):
             ia = np.argmax(inA[c1], axis=1)
             ib = np.argmax(inB[c1], axis=1)
-            out[c1] = _sectors_overlap(A[c1], B[c1], nA[c1], ia, ib, eps_d)
+            out[c1] = _sectors_overlap(tri[a[c1]], tri[b[c1]], nrm[a[c1]], ia, ib, eps_d)
     return out
 
 
@@ -411,31 +420,36 @@ def _sectors_overlap(A: np.ndarray, B: np.ndarray, nA: np.ndarray, ia: np.ndarra
 
     Two convex sectors around a point overlap iff one's boundary direction
     lies strictly inside the other, or they coincide; and if the corners
-    overlap, so do the triangles, just next to the shared vertex.
+    overlap, so do the triangles, just next to the shared vertex. Done in 2D
+    (projected along the normal's largest axis, orientation kept by its sign).
     """
     rows = np.arange(len(A))
+    drop = np.argmax(np.abs(nA), axis=1)
+    sgn = np.sign(nA[rows, drop])
     s = A[rows, ia]
-    a1, a2 = A[rows, (ia + 1) % 3] - s, A[rows, (ia + 2) % 3] - s
-    b1, b2 = B[rows, (ib + 1) % 3] - s, B[rows, (ib + 2) % 3] - s
-    nn = np.sqrt(dot3(nA, nA))
+    vecs = [A[rows, (ia + 1) % 3] - s, A[rows, (ia + 2) % 3] - s, B[rows, (ib + 1) % 3] - s, B[rows, (ib + 2) % 3] - s]
+    (a1x, a1y), (a2x, a2y), (b1x, b1y), (b2x, b2y) = (_project2(v, drop) for v in vecs)
+    scale = np.sqrt(np.maximum(a1x * a1x + a1y * a1y, b1x * b1x + b1y * b1y))
+    tol = eps * scale
 
-    def side(u: np.ndarray, w: np.ndarray) -> np.ndarray:
-        return dot3(cross3(u, w), nA) / nn  # > 0: w lies counter-clockwise of u (about nA)
+    def side(ux: np.ndarray, uy: np.ndarray, wx: np.ndarray, wy: np.ndarray) -> np.ndarray:
+        # > 0: w lies counter-clockwise of u (about the normal), scaled by |w|
+        return sgn * (ux * wy - uy * wx) / np.maximum(np.sqrt(ux * ux + uy * uy), 1e-300)
 
-    tol = eps * np.sqrt(np.maximum(dot3(a1, a1), dot3(b1, b1)))
+    def oriented(ux, uy, vx, vy):  # type: ignore[no-untyped-def]
+        ccw = side(ux, uy, vx, vy) > 0
+        return np.where(ccw, ux, vx), np.where(ccw, uy, vy), np.where(ccw, vx, ux), np.where(ccw, vy, uy)
 
-    def oriented(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        ccw = (side(u, v) > 0)[:, None]
-        return np.where(ccw, u, v), np.where(ccw, v, u)
+    a1x, a1y, a2x, a2y = oriented(a1x, a1y, a2x, a2y)
+    b1x, b1y, b2x, b2y = oriented(b1x, b1y, b2x, b2y)
 
-    a1, a2 = oriented(a1, a2)
-    b1, b2 = oriented(b1, b2)
+    def strictly_in(ux, uy, vx, vy, wx, wy):  # type: ignore[no-untyped-def]
+        return (side(ux, uy, wx, wy) > tol) & (side(wx, wy, vx, vy) > tol)
 
-    def strictly_in(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
-        return (side(u, w) > tol) & (side(w, v) > tol)
-
-    over = strictly_in(a1, a2, b1) | strictly_in(a1, a2, b2) | strictly_in(b1, b2, a1) | strictly_in(b1, b2, a2)
-    same = (np.abs(side(a1, b1)) <= tol) & (np.abs(side(a2, b2)) <= tol) & (dot3(a1, b1) > 0) & (dot3(a2, b2) > 0)
+    over = (strictly_in(a1x, a1y, a2x, a2y, b1x, b1y) | strictly_in(a1x, a1y, a2x, a2y, b2x, b2y)
+            | strictly_in(b1x, b1y, b2x, b2y, a1x, a1y) | strictly_in(b1x, b1y, b2x, b2y, a2x, a2y))
+    same = ((np.abs(side(a1x, a1y, b1x, b1y)) <= tol) & (np.abs(side(a2x, a2y, b2x, b2y)) <= tol)
+            & (a1x * b1x + a1y * b1y > 0) & (a2x * b2x + a2y * b2y > 0))
     return over | same
 
 

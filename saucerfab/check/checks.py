@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from saucerfab.check.bvh import BVH, tri_tri_intersect
+from saucerfab.check.bvh import BVH, cross3, pair_intersections
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import MeshData
 from saucerfab.check.report import Finding, finding
@@ -326,27 +326,34 @@ def _self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndar
                         diag: float, limits: Limits, out: list[Finding], stats: dict[str, Any]) -> None:
     eps = 1e-9 * diag
     m = len(tri)
-    # Budgets scale with the mesh (a sound mesh visits ~45 node pairs and keeps ~8 candidate pairs per
-    # triangle), capped by the limit, so a pile of overlapping triangles ends quickly as "partial".
-    visit_budget = min(limits.max_pair_tests, 200 * m + 1_000_000)
-    pair_budget = min(limits.max_pair_tests // 2, 40 * m + 1_000_000)
-    ii, jj, complete = bvh.overlapping_pairs(tol=eps, budget=visit_budget, workers=_workers())
-    if len(ii) > pair_budget:
-        ii, jj, complete = ii[:pair_budget], jj[:pair_budget], False
-    def narrow(s: int) -> np.ndarray:
-        a, b = ii[s : s + _PAIR_CHUNK], jj[s : s + _PAIR_CHUNK]
-        hit = tri_tri_intersect(tri[a], tri[b], Fg[a], Fg[b], eps)
+    # The budget scales with the mesh (a sound mesh visits ~45 node pairs per triangle), capped by the
+    # limit, so a pile of overlapping triangles ends quickly with a sampled, "partial" answer.
+    budget = min(limits.max_pair_tests, 100 * m + 1_000_000)
+
+    nrm = cross3(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+
+    def narrow(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        hit = pair_intersections(tri, Fg, nrm, a, b, eps)
         return np.stack([a[hit], b[hit]], axis=1)
 
-    starts = range(0, len(ii), _PAIR_CHUNK)
-    if len(starts) > 1:
-        # numpy releases the GIL in its loops: chunks in threads use a second core when there is one
-        from concurrent.futures import ThreadPoolExecutor
+    found: list[np.ndarray] = []
+    workers = _workers()
+    chunks = _rechunk(bvh.pair_chunks(tol=eps, budget=budget), _PAIR_CHUNK)
+    if workers > 1 and m > 20_000:
+        # numpy releases the GIL in its loops: the search (this thread) and the exact tests (the pool)
+        # overlap, and a second core is used where there is one; a few chunks in flight bound memory
+        from concurrent.futures import Future, ThreadPoolExecutor
 
-        with ThreadPoolExecutor(max_workers=_workers()) as ex:
-            found = list(ex.map(narrow, starts))
+        with ThreadPoolExecutor(max_workers=workers) as ex:
+            pending: list[Future[np.ndarray]] = []
+            for a, b in chunks:
+                pending.append(ex.submit(narrow, a, b))
+                if len(pending) > 2 * workers:
+                    found.append(pending.pop(0).result())
+            found += [f.result() for f in pending]
     else:
-        found = [narrow(s) for s in starts]
+        found = [narrow(a, b) for a, b in chunks]
+    complete = bvh.pairs_complete
     pairs = np.concatenate(found) if found else np.zeros((0, 2), dtype=np.int64)
     stats["self_intersecting_pairs"] = len(pairs)
     stats["self_intersection_check"] = "full" if complete else "partial"
@@ -439,6 +446,23 @@ def _manifold3d(Vu: np.ndarray, F: np.ndarray, out: list[Finding], stats: dict[s
     stats["manifold3d_status"] = name
     if name != "NoError":
         out.append(finding("not_manifold", f"manifold3d rejects the mesh: {name}"))
+
+
+def _rechunk(chunks: Any, size: int) -> Any:
+    """Pairs from ``chunks`` regrouped into arrays of ``size`` (the last one smaller)."""
+    buf_a: list[np.ndarray] = []
+    buf_b: list[np.ndarray] = []
+    n = 0
+    for a, b in chunks:
+        buf_a.append(a)
+        buf_b.append(b)
+        n += len(a)
+        while n >= size:
+            a, b = np.concatenate(buf_a), np.concatenate(buf_b)
+            yield a[:size], b[:size]
+            buf_a, buf_b, n = [a[size:]], [b[size:]], len(a) - size
+    if n:
+        yield np.concatenate(buf_a), np.concatenate(buf_b)
 
 
 def _printer_file_checks(md: MeshData, profile: PrinterProfile | None, m: int, file_bytes: int,

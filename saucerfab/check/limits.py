@@ -8,9 +8,10 @@ checked separately and give "not printable" findings, while a file over a
 checker limit is refused as unreadable (exit 2) with the limit's name in
 the message, so the user knows which knob to turn.
 
-Defaults suit a 16 GB machine: the largest file the checker accepts needs
-roughly 2-3 GB of memory at peak (10 million triangles are refused; see
-``max_triangles``).
+Defaults suit a machine with 8 GB or more: checking takes about 1 GB of
+memory per million triangles at peak, so the largest file accepted (5
+million triangles) needs about 5 GB, and a 10-million-face file is refused
+from its header (see ``max_triangles``).
 """
 
 from __future__ import annotations
@@ -53,9 +54,10 @@ class Limits:
         max_ray_tests: cap on box and triangle tests of the thin-wall rays
             (the checks also scale it to the mesh); past it the estimate is
             marked partial rather than taking longer.
-        max_pair_tests: cap on node-pair visits of the self-intersection
-            search (half of it on candidate triangle pairs; both also scaled
-            to the mesh); past it the check is marked partial.
+        max_pair_tests: cap on node-pair tests of the self-intersection
+            search (the checks also scale it to the mesh: ~100 per triangle,
+            twice what a sound mesh needs); past it the search samples and
+            the check is marked partial.
         min_wall_mm: wall thickness to warn under when no printer is given
             (``None``: only report the estimate).
         texture_dpi_fraction: warn when the texture's resolution on the
@@ -86,7 +88,7 @@ class Limits:
     max_nesting: int = 32
     thin_wall_samples: int = 4096
     max_ray_tests: int = 20_000_000
-    max_pair_tests: int = 40_000_000
+    max_pair_tests: int = 500_000_000
     min_wall_mm: float | None = None
     texture_dpi_fraction: float = 0.5
     plausible_size_mm: tuple[float, float] = (5.0, 5000.0)

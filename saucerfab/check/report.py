@@ -375,7 +375,7 @@ def _fmt_size(stats: dict[str, Any]) -> str:
     bb = stats.get("bbox_mm")
     if not bb:
         return "-"
-    return " x ".join(f"{v:.1f}" for v in bb["size"])
+    return "x".join(f"{v:.4g}" for v in bb["size"])
 
 
 def _fmt_num(v: Any, fmt: str) -> str:
@@ -408,8 +408,8 @@ def render_table(reports: Sequence[Report], *, console: Any = None) -> None:
             f"[{style[r.verdict]}]{r.verdict}[/]",
             _fmt_num(s.get("triangles"), ","),
             _fmt_size(s),
-            "-" if vol is None else f"{vol / 1000:.2f}",
-            _fmt_num(s.get("min_wall_mm"), ".2f"),
+            "-" if vol is None else f"{vol / 1000:.4g}",
+            _fmt_num(s.get("min_wall_mm"), ".3g"),
             f"{len(r.errors)}/{len(r.warnings)}",
         )
     con.print(table)

@@ -26,6 +26,20 @@ Construction, all with manifold3d so the result is a guaranteed oriented
 * union, difference; then manifold's status must be ``NoError`` *and* the
   volume positive (an inverted mesh also reports NoError).
 
+Exact contact. The seat meets the block face to face, which manifold's
+symbolic perturbation joins cleanly *only if the faces coincide exactly*.
+The seat's outlines come from ``CrossSection`` (Clipper2), which rounds 2-D
+coordinates onto a fixed grid (about 7.5 nm), so a plate built from the float
+footprint would sit a few nanometres into the block (a sliver over the
+saucer's top: vertices nanometres apart, which round onto one position) or
+beside it (a part in pieces). Hence: the block's border columns/rows are put
+on that grid (:func:`footprint_on_clipper_grid`); offset outlines are
+``simplify``-ed (round joins leave vertex pairs 10 nm apart, which the hull
+and the ring would keep differently); and the seat solids' vertices within
+``OUTLINE_EPS_MM`` of the border are snapped onto it
+(:func:`snap_to_footprint`: Clipper may round an edge crossing one grid step
+off the edge).
+
 Vertices and faces are then put in a canonical order (sorted positions,
 rotated and sorted faces) so the same design always gives the same bytes,
 whatever order manifold's parallel kernels emit.
@@ -48,6 +62,10 @@ from saucerfab.heightfield import make_grid, triangulate
 #: the 10 nm rounding of written coordinates, so no two distinct vertices
 #: can round onto one position
 MERGE_TOLERANCE_MM = 1e-4
+
+#: vertices of the seat's offset outlines closer than this to the line through
+#: their neighbours are dropped (``CrossSection.simplify``), mm
+OUTLINE_EPS_MM = 1e-6
 
 
 @dataclass(frozen=True)
@@ -263,6 +281,80 @@ def _cup_outline_mm(design: Design, mm_per_unit: float) -> np.ndarray:
     return cup.boundary(min(seg, 2048)) * mm_per_unit
 
 
+def footprint_on_clipper_grid(xs_mm: np.ndarray, ys_mm: np.ndarray):  # -> (CrossSection, xs, ys)
+    """The saucer's footprint rectangle and the grid, its border moved onto CrossSection's grid.
+
+    manifold3d's ``CrossSection`` (Clipper2) computes in fixed-point
+    integers: every boolean rounds 2-D coordinates onto a grid of 2**-27 mm
+    (about 7.5 nm; manifold3d 3.5). A seat plate made by ``hull - footprint``
+    therefore meets the block not at the block's float border but a few
+    nanometres beside it: a sliver over the saucer's top (vertices a few
+    nanometres apart, which then round onto one position) or a gap (the part
+    falls apart). Moving the block's border columns/rows onto that grid (by
+    at most a few nanometres) makes the plate's edges along the footprint
+    bit-identical to the block's walls, so the union sees exact face contact,
+    which manifold's symbolic perturbation joins cleanly. The rounding is
+    idempotent, so every later CrossSection operation keeps those values.
+
+    Returns:
+        the footprint CrossSection, and copies of ``xs_mm`` / ``ys_mm`` whose
+        first and last entries are the footprint's (rounded) edges.
+    """
+    import manifold3d as m3d
+
+    rect = np.array(
+        [[xs_mm[0], ys_mm[0]], [xs_mm[-1], ys_mm[0]], [xs_mm[-1], ys_mm[-1]], [xs_mm[0], ys_mm[-1]]],
+        np.float64,
+    )
+    footprint = m3d.CrossSection([rect])  # the constructor's union rounds onto the grid
+    x0, y0, x1, y1 = footprint.bounds()
+    xs = np.array(xs_mm, np.float64)
+    ys = np.array(ys_mm, np.float64)
+    xs[0], xs[-1], ys[0], ys[-1] = x0, x1, y0, y1
+    if not (np.all(np.diff(xs) > 0) and np.all(np.diff(ys) > 0)):
+        raise MeshError("the saucer grid is too fine for manifold3d's 2-D precision; lower the resolution")
+    return footprint, xs, ys
+
+
+def snap_to_footprint(points: np.ndarray, xs_mm: np.ndarray, ys_mm: np.ndarray) -> np.ndarray:
+    """Move points within ``OUTLINE_EPS_MM`` of the footprint's border exactly onto it.
+
+    Clipper computes the crossing of an outline with a footprint edge in
+    integers and may round it one grid step (about 7 nm) off that edge; the
+    seat's faces along the saucer's walls would then be a hair skew to the
+    block's walls and the union leaves vertices nanometres apart. Only points
+    on (within the tolerance of) one of the rectangle's four edges move, each
+    by at most the tolerance.
+
+    Args:
+        points: (..., 2 or 3) positions, model mm; x and y are used.
+        xs_mm, ys_mm: the block's grid (the border is ``xs[0], xs[-1]``,
+            ``ys[0], ys[-1]``).
+
+    Returns:
+        a snapped copy of ``points``.
+    """
+    p = np.array(points, np.float64, copy=True)
+    x, y = p[..., 0], p[..., 1]
+    eps = OUTLINE_EPS_MM
+    (x0, x1), (y0, y1) = (xs_mm[0], xs_mm[-1]), (ys_mm[0], ys_mm[-1])
+    along_y = (y >= y0 - eps) & (y <= y1 + eps)
+    along_x = (x >= x0 - eps) & (x <= x1 + eps)
+    for edge in (x0, x1):
+        x[along_y & (np.abs(x - edge) <= eps)] = edge
+    for edge in (y0, y1):
+        y[along_x & (np.abs(y - edge) <= eps)] = edge
+    return p
+
+
+def seat_prism(cs, z0: float, z1: float, xs_mm: np.ndarray, ys_mm: np.ndarray):  # -> manifold3d.Manifold
+    """``cs`` extruded from ``z0`` to ``z1`` (model mm), its vertices snapped onto the footprint's border."""
+    import manifold3d as m3d
+
+    m = m3d.Manifold.extrude(cs, z1 - z0).translate((0.0, 0.0, z0))
+    return m.warp_batch(lambda p: snap_to_footprint(p, xs_mm, ys_mm))
+
+
 def _cross_section(poly: np.ndarray):  # -> manifold3d.CrossSection
     import manifold3d as m3d
 
@@ -313,7 +405,7 @@ def build_solid(
         raise MeshError(f"mm_per_unit must be positive, got {mm_per_unit}")
     grid = make_grid(design.scene.saucer)
     s = float(mm_per_unit)
-    xs, ys = grid.xs * s, grid.ys * s
+    footprint, xs, ys = footprint_on_clipper_grid(grid.xs * s, grid.ys * s)
     hmm = np.asarray(design.heights, np.float64) * s
     z_bottom = min(-opts.base_thickness_mm, float(hmm.min()) - opts.min_thickness_mm)
 
@@ -358,30 +450,37 @@ def build_solid(
         raise MeshError(f"manifold3d rejected the saucer block: {block.status()}")
 
     cup_outline = _cup_outline_mm(design, s)
-    footprint = m3d.CrossSection.square((xs[-1] - xs[0], ys[-1] - ys[0])).translate((xs[0], ys[0]))
     solid = block
     kind = opts.seat
     top_z = 0.0
     pocket = np.zeros((0, 2))
     if kind != "none":
         cup_cs = _cross_section(cup_outline)
-        inner = cup_cs.offset(opts.seat_clearance_mm, m3d.JoinType.Round) if opts.seat_clearance_mm > 0 else cup_cs
-        outer = cup_cs.offset(opts.seat_clearance_mm + opts.seat_rim_mm, m3d.JoinType.Round)
+        # Clipper's round joins can leave vertex pairs ~1e-8 mm apart; the hull keeps one
+        # of a pair and the ring both, so the two outlines would differ by a sliver.
+        # simplify() drops them (moving the outline by under OUTLINE_EPS_MM).
+        inner = (
+            cup_cs.offset(opts.seat_clearance_mm, m3d.JoinType.Round).simplify(OUTLINE_EPS_MM)
+            if opts.seat_clearance_mm > 0
+            else cup_cs
+        )
+        outer = cup_cs.offset(opts.seat_clearance_mm + opts.seat_rim_mm, m3d.JoinType.Round).simplify(
+            OUTLINE_EPS_MM
+        )
         if not (inner - footprint).area() >= inner.area() * (1 - 1e-9):
             warnings.append(
                 "the cup's clearance outline overlaps the saucer's footprint; the seat is clipped there"
             )
         plate_cs = m3d.CrossSection.batch_hull([outer, footprint]) - footprint
         pocket_cs = inner - footprint
+        top_z = opts.seat_depth_mm
         if kind == "recess":
-            top_z = opts.seat_depth_mm
-            plate = m3d.Manifold.extrude(plate_cs, top_z - z_bottom).translate((0.0, 0.0, z_bottom))
-            cut = m3d.Manifold.extrude(pocket_cs, top_z + 1.0)  # from the standing plane z = 0 up
+            plate = seat_prism(plate_cs, z_bottom, top_z, xs, ys)
+            cut = seat_prism(pocket_cs, 0.0, top_z + 1.0, xs, ys)  # from the standing plane z = 0 up
             solid = m3d.Manifold.batch_boolean([block, plate], m3d.OpType.Add) - cut
         else:  # ring
-            top_z = opts.seat_depth_mm
-            plate = m3d.Manifold.extrude(plate_cs, -z_bottom).translate((0.0, 0.0, z_bottom))
-            ring = m3d.Manifold.extrude((outer - inner) - footprint, opts.seat_depth_mm)
+            plate = seat_prism(plate_cs, z_bottom, 0.0, xs, ys)
+            ring = seat_prism((outer - inner) - footprint, 0.0, opts.seat_depth_mm, xs, ys)
             solid = m3d.Manifold.batch_boolean([block, plate, ring], m3d.OpType.Add)
         polys = pocket_cs.to_polygons()
         pocket = np.asarray(max(polys, key=len), np.float64) if polys else pocket

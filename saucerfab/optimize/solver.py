@@ -54,6 +54,9 @@ class SolverSettings:
         patience: consecutive iterations below ``tol`` needed to stop.
         max_iters: iteration cap.
         max_backtracks: halvings of the step before giving up on a direction.
+        max_rejections: consecutive iterations without an accepted step
+            (each with its moments reset) after which the stage ends: no
+            descent is left at this step size.
         armijo: sufficient-decrease constant.
         optimize_heights: False keeps h fixed (texture-only ablations).
         energy_floor: subtracted from the energy before taking the relative
@@ -71,6 +74,7 @@ class SolverSettings:
     patience: int = 3
     max_iters: int = 400
     max_backtracks: int = 6
+    max_rejections: int = 4
     armijo: float = 1e-4
     optimize_heights: bool = True
     energy_floor: float = 0.0
@@ -102,6 +106,8 @@ class SolveResult:
     converged: bool
     log: list[dict[str, float]] = field(default_factory=list)
     seconds: float = 0.0
+    evaluations: int = 0
+    stop_reason: str = ""
 
 
 class _Adamax:
@@ -162,7 +168,11 @@ def solve(
     h = h0.detach().clone()
     c = c0.detach().clone()
 
+    evaluations = 0
+
     def full(hh: torch.Tensor, cc: torch.Tensor) -> tuple[torch.Tensor, float, dict[str, float]]:
+        nonlocal evaluations
+        evaluations += 1
         hh = hh.detach().requires_grad_(s.optimize_heights)
         cc = cc.detach().requires_grad_(True)
         e, parts = objective(hh, cc)
@@ -185,10 +195,13 @@ def solve(
     g_c = cc.grad if cc.grad is not None else torch.zeros_like(c)
     log: list[dict[str, float]] = []
     calm = 0
+    rejected = 0
     converged = False
+    reason = "max_iters"
     it = 0
     for it in range(1, s.max_iters + 1):
         if should_stop is not None and should_stop():
+            reason = "stopped"
             break
         (m_h, m_c), (u_h, u_c) = adam.update([g_h, g_c])
         step_c = s.lr_c * m_c / u_c  # m_c is already bias-corrected
@@ -218,7 +231,12 @@ def solve(
         if not accepted:
             adam.reset()
             calm = 0
+            rejected += 1
+            if rejected >= s.max_rejections:
+                converged, reason = True, "no_descent"
+                break
             continue
+        rejected = 0
         e_try.backward()
         hh, cc = e_try._saucerfab_inputs  # type: ignore[attr-defined]
         g_h = hh.grad if hh.grad is not None else torch.zeros_like(h)
@@ -231,9 +249,9 @@ def solve(
             callback(it, total, parts)
         calm = calm + 1 if rel < s.tol else 0
         if calm >= s.patience:
-            converged = True
+            converged, reason = True, "tolerance"
             break
-    return SolveResult(h, c, it, total, converged, log, time.perf_counter() - t0)
+    return SolveResult(h, c, it, total, converged, log, time.perf_counter() - t0, evaluations, reason)
 
 
 def _max_feasible_step(

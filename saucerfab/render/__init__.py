@@ -7,7 +7,9 @@
 * :func:`rasterize_hard`, :func:`render_textured`, :func:`render_face_colors_hard` -
   nearest-face rasterization for previews and visibility (:mod:`saucerfab.render.hard`).
 
-torch is imported only when a function that needs it is called.
+Only the camera is imported with the package; the rasterizers (and numba,
+torch) load on first use, so ``from saucerfab.render.camera import Camera``
+stays cheap.
 
 Importing this package sets ``OMP_WAIT_POLICY=PASSIVE`` unless the environment
 already sets it: torch's OpenMP workers otherwise busy-wait after each torch
@@ -16,12 +18,35 @@ variable when torch is first imported, so it helps when saucerfab.render is
 imported before torch, as the CLI does).
 """
 
+from __future__ import annotations
+
 import os
+from typing import Any
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from saucerfab.render.camera import Camera  # noqa: E402
-from saucerfab.render.hard import rasterize_hard, render_face_colors_hard, render_textured  # noqa: E402
-from saucerfab.render.soft import soft_rasterize  # noqa: E402
 
 __all__ = ["Camera", "rasterize_hard", "render_face_colors_hard", "render_textured", "soft_rasterize"]
+
+_LAZY = {
+    "soft_rasterize": "saucerfab.render.soft",
+    "rasterize_hard": "saucerfab.render.hard",
+    "render_face_colors_hard": "saucerfab.render.hard",
+    "render_textured": "saucerfab.render.hard",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """Load the rasterizers on first use (PEP 562)."""
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'saucerfab.render' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

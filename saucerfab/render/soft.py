@@ -35,6 +35,25 @@ Gradients are the exact derivatives of this forward function (what
 ``torch.autograd.gradcheck`` checks), including the depth's dependence on
 the corners' x, y through ``w_clip``; SoftRas's hand-written backward drops
 that term and divides the alpha gradient by ``max(1 - D, 1e-6)``.
+
+Constants taken from SoftRas, all of them:
+
+* defaults of ``soft_rasterize``: ``sigma_val = 1e-5``, ``gamma_val = 1e-4``,
+  ``near = 1``, ``far = 100``, ``eps = 1e-3``, ``dist_eps = 1e-4``,
+  ``background_color = [0, 0, 0]``; the paper's runs use them with sigma
+  1e-5 and 1e-7;
+* ``dist_eps -> log(1 / dist_eps - 1)`` (the Python wrapper), times ``sigma``
+  in the kernel: the skip threshold on ``d^2``; faces are culled first by
+  their bounding box widened by its square root (``check_border``), which
+  never drops a pair the threshold keeps;
+* ``1e-10``: the determinant clamp of ``forward_soft_rasterize_inv_cuda_kernel``
+  (:data:`DET_EPS`);
+* ``1e-5``: the clamp of the clipped barycentric sum in ``barycentric_clip``
+  (:data:`WSUM_EPS`);
+* the running softmax's start: sum ``exp(eps / gamma)``, maximum ``eps``;
+* pixel centres ``x = (2 j + 1 - S) / S``, ``y = (2 (S - 1 - i) + 1 - S) / S``
+  for image row ``i``: the same as :mod:`saucerfab.render.camera`'s
+  convention (row 0 at the top).
 """
 
 from __future__ import annotations
@@ -105,7 +124,7 @@ def _check_args(
 
     if not isinstance(vertices, torch.Tensor) or vertices.ndim != 2 or vertices.shape[1] != 3:
         raise ConfigError(f"vertices must be a (V, 3) tensor, got {getattr(vertices, 'shape', type(vertices))}")
-    if not vertices.dtype.is_floating_point:
+    if vertices.dtype not in (torch.float32, torch.float64):
         raise ConfigError(f"vertices must be float32 or float64, got {vertices.dtype}")
     if not isinstance(faces, torch.Tensor) or faces.ndim != 2 or faces.shape[1] != 3:
         raise ConfigError(f"faces must be an (F, 3) integer tensor, got {getattr(faces, 'shape', type(faces))}")

@@ -173,11 +173,91 @@ def _fast_blocks(data: bytes, marker_ns: str, limits: Limits) -> tuple[bytes, li
     return b"".join(pieces), blocks
 
 
+def _uniform_spans(content: bytes, tag: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[bytes]] | None:
+    """Value spans of a block of identically formatted ``<tag a="..." .../>`` elements, checked with numpy.
+
+    The common case of one writer's output: every separator between values
+    at the same attribute slot is the same bytes. Each distinct separator is
+    checked once against the grammar, and all others are compared to it as
+    byte arrays, with no Python object per value. Returns (bytes, value
+    starts, value ends, attribute names), or None to use the general path.
+    """
+    buf = np.frombuffer(content, np.uint8)
+    q = np.flatnonzero(buf == 34)  # '"'
+    if len(q) == 0 or len(q) % 2:
+        return None
+    st, en = q[0::2] + 1, q[1::2]
+    nv = len(st)
+    sep_st = np.concatenate([[0], en[:-1] + 1])  # separator before value i: [sep_st[i], st[i] - 1)
+    sep_en = st - 1
+    first_re, next_re = _element_res(tag)
+    m = first_re.fullmatch(content[: q[0]])
+    if m is None:
+        return None
+    names = [m.group(1)]
+    k = 1
+    while k < nv:
+        a = _ATTR.fullmatch(content[sep_st[k] : sep_en[k]])
+        if a is None:
+            break
+        names.append(a.group(1))
+        k += 1
+    n = nv // k
+    if n * k != nv or len(set(names)) != k or _END.fullmatch(content[int(en[-1]) + 1 :]) is None:
+        return None
+    for j in range(k):
+        idx = np.arange(j, nv, k)[1:] if j == 0 else np.arange(j, nv, k)
+        if not len(idx):
+            continue
+        s0, ln = sep_st[idx], sep_en[idx] - sep_st[idx]
+        width = int(ln[0])
+        if (ln != width).any():
+            return None  # formatting varies: the general path checks each distinct separator
+        rep = content[int(s0[0]) : int(s0[0]) + width]
+        mm = (next_re if j == 0 else _ATTR).fullmatch(rep)
+        if mm is None or mm.group(1) != names[j]:
+            return None
+        for c in range(width):  # column by column: O(values) memory
+            if (buf[s0 + c] != rep[c]).any():
+                return None
+    return buf, st, en, names
+
+
+def _span_ints(buf: np.ndarray, st: np.ndarray, en: np.ndarray) -> np.ndarray | None:
+    """Non-negative decimal integers in the spans (Horner's rule column by column), or None."""
+    ln = en - st
+    if len(ln) and (ln.min() < 1 or ln.max() > 18):
+        return None
+    acc = np.zeros(len(st), dtype=np.int64)
+    for c in range(int(ln.max()) if len(ln) else 0):
+        live = c < ln
+        d = buf[np.where(live, st + c, 0)].astype(np.int64) - 48
+        if ((d < 0) | (d > 9))[live].any():
+            return None
+        acc = np.where(live, acc * 10 + d, acc)
+    return acc
+
+
 def _parse_block(kind: str, content: bytes, prefix: bytes) -> Any:
     """The numbers of one bulk block, or None to leave it to the XML parser."""
     if b"&" in content or b"<!" in content or b"<?" in content:
         return None
     tag = {"vertices": b"vertex", "triangles": b"triangle", "tex2coord": prefix + b"tex2coord"}[kind]
+    fast = _uniform_spans(content, tag)
+    if fast is not None:
+        buf, st, en, names = fast
+        want = {"vertices": [b"x", b"y", b"z"], "tex2coord": [b"u", b"v"]}.get(kind)
+        if want is not None:
+            if sorted(names) == want:
+                try:  # the structure is checked; the values between the quotes are all that is left
+                    arr = np.array(content.split(b'"')[1::2], dtype=np.float64).reshape(-1, len(want))
+                except ValueError:
+                    return None
+                return arr[:, [names.index(c) for c in want]]
+        elif set(names) <= set(_TRI_ATTR_ORDER) and {b"v1", b"v2", b"v3"} <= set(names):
+            ints = _span_ints(buf, st, en)
+            if ints is not None:
+                return ints.reshape(-1, len(names)), tuple(names)
     split = _split_elements(content, tag)
     if split is None:
         return None
