@@ -256,6 +256,10 @@ def _drive(
             early.append(o)
         else:
             todo.append((p.job, 1))
+    # Longest first: raw-input jobs (design + export + check) start before the
+    # design-folder jobs (export + check), so no worker is left with a long
+    # design at the end while the others idle. The report keeps manifest order.
+    todo = deque(sorted(todo, key=lambda item: item[0].kind != "raw"))
     display.start(len(plan), sum(o.reused for o in outcomes.values()))
     for o in early:
         display.done(o)

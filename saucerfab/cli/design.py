@@ -51,6 +51,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=["auto", "as_given"],
         help="with --reflected2: turn the prism to the placement whose facet regions overlap least (auto)",
     )
+    p.add_argument(
+        "--color-init",
+        default="gray",
+        choices=["gray", "projected"],
+        help="starting face colours: grey (the paper) or projected from the enhanced targets (Fig. 12 c)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
@@ -80,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
         ablation=args.ablation,
         frames=args.frames,
         prism_placement=args.prism_placement,
+        color_init=args.color_init,
     )
     quiet = (lambda *a: None) if args.quiet else None
     out = run_design(req, args.out, progress=quiet)

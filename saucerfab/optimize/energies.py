@@ -63,7 +63,10 @@ class DeformEnergy:
 
     def apply(self, h: torch.Tensor) -> torch.Tensor:
         """L h for (V,) h."""
-        return (h[self.idx] * self.wts.to(h.dtype)).sum(dim=1)
+        # index_select's backward is index_add (fast); h[idx] would go through
+        # index_put with accumulate, which is slow on the CPU
+        g = h.index_select(0, self.idx.reshape(-1)).view(self.idx.shape)
+        return (g * self.wts.to(h.dtype)).sum(dim=1)
 
     def __call__(self, h: torch.Tensor) -> torch.Tensor:
         return ((self.lz - self.apply(h)) ** 2).sum()
@@ -76,12 +79,12 @@ def e_barrier(h: torch.Tensor, z: torch.Tensor, c: torch.Tensor, delta: float) -
     phi does; callers keep iterates strictly feasible (the line search).
     """
     dz = z - h
-    parts = [delta - dz, delta + dz, c.reshape(-1), 1 - c.reshape(-1)]
-    total = h.new_zeros(())
-    for p in parts:
-        if bool((p <= 0).any()):
-            return h.new_tensor(float("inf"))
-        total = total - torch.log(p).sum()
+    cf = c.reshape(-1)
+    # log of a non-positive number is -inf or NaN; one finiteness test at the
+    # end replaces a synchronising test per term
+    total = -(torch.log(delta - dz).sum() + torch.log(delta + dz).sum() + torch.log(cf).sum() + torch.log(1 - cf).sum())
+    if not bool(torch.isfinite(total)):
+        return h.new_tensor(float("inf"))
     return total
 
 

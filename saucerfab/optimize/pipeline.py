@@ -243,7 +243,7 @@ def run_design(
     from saucerfab.heightfield import laplacian
     from saucerfab.optimize.energies import DeformEnergy, barrier_floor, e_barrier, e_visual
     from saucerfab.optimize.solver import ProxSettings, SolverSettings, solve
-    from saucerfab.optimize.targets import blur_matched_targets, compatibility
+    from saucerfab.optimize.targets import blur_matched_targets, compatibility, projected_colors
     from saucerfab.optimize.texturing import texture_saucer, visible_faces
     from saucerfab.optimize.views import Rig
 
@@ -283,8 +283,6 @@ def run_design(
         weights = {k: (float(given[k]) if given[k] is not None else WEIGHT_FACTORS[k] * rho) for k in WEIGHT_FACTORS}
     t_setup = time.perf_counter() - t0
 
-    h = torch.as_tensor(base.reshape(-1), dtype=dtype) + 0.0
-    c = torch.full((rig.num_faces, 3), 0.5, dtype=dtype)
     log: list[dict[str, Any]] = []
     metrics: dict[str, Any] = {"stages": [], "rho": rho, "weights": weights, "setup_s": t_setup}
     if prep.placement:
@@ -299,8 +297,16 @@ def run_design(
         metrics = resumed["metrics"]
         weights = resumed["weights"]
         print(f"  resuming from checkpoint after stage {first} of {len(stages)}", file=sys.stderr)
-    # feasibility margin: the barrier is infinite on the boundary
-    c = c.clamp(1e-4, 1 - 1e-4)
+    else:
+        h = torch.as_tensor(base.reshape(-1), dtype=dtype) + 0.0
+        if request.color_init == "projected":
+            imgs = prep.enhanced if stages[0].targets == "enhanced" else prep.render
+            c = torch.as_tensor(projected_colors(rig, base, imgs), dtype=dtype)
+        else:
+            c = torch.full((rig.num_faces, 3), 0.5, dtype=dtype)
+        # feasibility margin: the barrier is infinite on the boundary, and a
+        # colour a hair from it would start with a huge barrier gradient
+        c = c.clamp(0.02, 0.98)
 
     mu = request.barrier_weight
     h_e = h.clone()

@@ -38,6 +38,10 @@ class DesignRequest:
         frames: "scene" keeps the scene's view frames (the paper's preset);
             "contain" / "cover" re-aim them at the saucer and its reflection
             (:mod:`saucerfab.optimize.framing`).
+        color_init: "gray" (0.5 everywhere, the paper's choice) or "projected"
+            (each face coloured from the enhanced targets by the texturing
+            step, the paper's Figure 12 (c), which it reports as comparable;
+            it skips the first iterations' colour fitting).
         prism_placement: with a second reflected image, "auto" turns the
             prism to the placement whose facet regions overlap least
             (:func:`saucerfab.optimize.regions.best_placement`); "as_given"
@@ -65,6 +69,7 @@ class DesignRequest:
     ablation: str = "full"
     frames: str = "scene"
     prism_placement: str = "auto"
+    color_init: str = "gray"
     extra: dict[str, Any] = field(default_factory=dict)
 
     ABLATIONS = ("full", "no_deform", "laplacian", "laplacian_bw", "sparse_only", "laplacian_sparse")
@@ -80,6 +85,8 @@ class DesignRequest:
             raise ConfigError(f"frames must be 'scene', 'contain' or 'cover', got {self.frames!r}")
         if self.prism_placement not in ("auto", "as_given"):
             raise ConfigError(f"prism_placement must be 'auto' or 'as_given', got {self.prism_placement!r}")
+        if self.color_init not in ("gray", "projected"):
+            raise ConfigError(f"color_init must be 'gray' or 'projected', got {self.color_init!r}")
         if self.max_iters < 1:
             raise ConfigError(f"max_iters must be at least 1, got {self.max_iters}")
         if not (self.barrier_weight > 0):

@@ -257,13 +257,18 @@ def solve(
 def _max_feasible_step(
     h: torch.Tensor, d_h: torch.Tensor, z: torch.Tensor, delta: float, c: torch.Tensor, d_c: torch.Tensor
 ) -> float:
-    """Largest beta with |z - (h - beta d_h)| <= delta and 0 <= c - beta d_c <= 1."""
-    best = float("inf")
+    """Largest beta with |z - (h - beta d_h)| <= delta and 0 <= c - beta d_c <= 1.
+
+    Per coordinate the step may run until the bound it moves towards:
+    ``(x - lo) / d`` when x decreases (d > 0), ``(hi - x) / -d`` when it
+    increases; the smallest over all coordinates bounds beta. Written with
+    ``where`` and one reduction (no boolean indexing: this runs every iteration).
+    """
+    inf = torch.tensor(float("inf"), dtype=h.dtype)
+    best = inf
     for x, d, lo, hi in ((h, d_h, z - delta, z + delta), (c, d_c, 0.0, 1.0)):
-        down = d > 0  # x decreases towards lo
-        up = d < 0
-        if bool(down.any()):
-            best = min(best, float(((x - lo)[down] / d[down]).min()))
-        if bool(up.any()):
-            best = min(best, float(((hi - x)[up] / -d[up]).min()))
-    return max(best, 0.0)
+        safe = torch.where(d == 0, torch.ones_like(d), d)
+        to_lo = torch.where(d > 0, (x - lo) / safe, inf)
+        to_hi = torch.where(d < 0, (hi - x) / -safe, inf)
+        best = torch.minimum(best, torch.minimum(to_lo.min(), to_hi.min()))
+    return max(float(best), 0.0)

@@ -150,3 +150,26 @@ def compatibility(
             rho += float(((targets[view.name] - seen_in_mirror) ** 2).sum())
             rho += float(((targets["direct"] - seen_directly) ** 2).sum())
     return rho
+
+
+def projected_colors(rig: Rig, heights: np.ndarray, images: dict[str, np.ndarray]) -> np.ndarray:
+    """Per-face colours (F, 3) from the texturing step's rule (section 3.4.2).
+
+    A face seen only directly takes the direct image's colour, one seen only
+    in a reflection that reflection's, one seen in both the average, one
+    seen in neither grey. Used to start the colours (paper, Figure 12 (c)).
+    """
+    from saucerfab.optimize.texturing import visible_faces
+
+    vis = visible_faces(rig, heights, supersample=1)
+    acc = np.zeros((rig.num_faces, 3))
+    cnt = np.zeros(rig.num_faces)
+    for view in rig.views:
+        cols = project_colors(view, heights, images[view.name], rig.num_faces)
+        seen = vis[view.name]
+        acc[seen] += cols[seen]
+        cnt[seen] += 1
+    out = np.full((rig.num_faces, 3), 0.5)
+    some = cnt > 0
+    out[some] = acc[some] / cnt[some, None]
+    return out

@@ -60,11 +60,8 @@ TILE_H = 32
 SW = TILE_W + LANES
 #: distance between the fields of the tile-local state
 NLOC = TILE_H * SW
-#: per-column gradient accumulators of the backward, and their row stride: a
-#: row's lane groups start at its own first kept pair, so the union of an
-#: entry's lanes, rounded up to whole groups, may reach 2 * LANES - 1 past the box
+#: per-column gradient accumulators of the backward
 N_ACC = 18
-SWA = TILE_W + 2 * LANES
 #: gradient slots per (face, tile): 6 corner xy, 9 barycentric matrix, 3 inverse depths, 3 colours
 N_GRAD = 21
 
@@ -322,21 +319,20 @@ def _forward(
 
 
 @njit(error_model="numpy", cache=True, nogil=True, fastmath={"contract", "reassoc"})
-def _group_sum(a, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
-    """sum(a[:n]) for n a multiple of LANES; folds the groups into a[:LANES] (a is scratch).
-
-    Fixed-width loops: LLVM turns them into a few vector adds and one horizontal
-    sum. (A plain loop over n would be vectorized 4 groups at a time and, for the
-    one or two groups an entry has, run entirely in its scalar remainder.)
-    Reassociation is allowed here only; the order is fixed by the code, so the
-    result is still deterministic.
-    """
-    for g in range(LANES, n, LANES):
-        for k in range(LANES):
-            a[k] += a[g + k]
+def _lane_sum(a, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """sum(a[:n]); reassociation lets LLVM vectorize it (same code, same order: deterministic)."""
     tot = a[0] - a[0]
-    for k in range(LANES):
+    for k in range(n):
         tot += a[k]
+    return tot
+
+
+@njit(error_model="numpy", cache=True, nogil=True, fastmath={"contract", "reassoc"})
+def _lane_dot(a, b, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """sum(a[:n] * b[:n]), vectorized as :func:`_lane_sum`."""
+    tot = a[0] - a[0]
+    for k in range(n):
+        tot += a[k] * b[k]
     return tot
 
 
@@ -371,7 +367,7 @@ def _backward_tile(
     # Slots 0-5: corner x, y; 6-8: sum of dL/dw_k (times px at the reduction:
     # the matrix row's x and constant terms); 9-11: sum of dL/dw_k * py;
     # 12-14: inverse depths; 15-17: colours.
-    acc = np.zeros(N_ACC * SWA, K.dtype)
+    acc = np.zeros(N_ACC * SW, K.dtype)
     for idx in range(tile_start[t], tile_start[t + 1]):
         entry = tile_entry[idx]
         f = entry_face[entry]
@@ -381,23 +377,13 @@ def _backward_tile(
             for j in range(N_GRAD):
                 grad[entry, j] = zero
             continue
-        # a row's lanes start at its first kept pair (the forward's row_lo); the
-        # entry's accumulators cover the union [u0, u0 + mu) of its rows' lanes
+        # a row's lanes start at its first unskipped pair (the forward's row_lo)
+        # and may run up to LANES - 1 past the box; m covers every row's lanes
+        m = min(cbx - ca + LANES, SW - (ca - ct0))
+        ac = acc[ca - ct0:]  # accumulator j of column ca + k is ac[j * SW + k]
+        for j in range(N_ACC):  # clear only the columns this entry uses
+            ac[j * SW:j * SW + m] = zero
         rs = row_start[entry] - ra
-        u0, u1 = SWA, -1
-        for r in range(ra, rb + 1):
-            lo, hi = row_lo[rs + r], row_hi[rs + r]
-            if hi >= lo:
-                u0 = min(u0, lo)
-                u1 = max(u1, lo + (hi - lo + LANES) // LANES * LANES)
-        if u1 < 0:  # every pair of the entry is skipped
-            for j in range(N_GRAD):
-                grad[entry, j] = zero
-            continue
-        mu = (u1 - u0 + LANES - 1) // LANES * LANES
-        ac = acc[ca - ct0:]  # accumulator j of column ca + k is ac[j * SWA + k]
-        for j in range(N_ACC):
-            ac[j * SWA + u0:j * SWA + u0 + mu] = zero
         ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2 = _face_consts(
             f, cxy, ee_min, one
         )
@@ -418,7 +404,7 @@ def _backward_tile(
             b2 = i21 * py + i22
             hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
             sv = st[(r - rt0) * SW + (ca + lo - ct0):]
-            av = ac[lo:]  # accumulator j of this row's lane k is av[j * SWA + k]
+            av = ac[lo:]
             pxv = px_tab[ca + lo:]
             for lane in range(n):
                 px = pxv[lane]
@@ -485,11 +471,11 @@ def _backward_tile(
                 k1 = (omt if e1sel else zero) + (bt if e0sel else zero)
                 k2 = (omt if e2sel else zero) + (bt if e1sel else zero)
                 av[lane] += u * k0
-                av[1 * SWA + lane] += v * k0
-                av[2 * SWA + lane] += u * k1
-                av[3 * SWA + lane] += v * k1
-                av[4 * SWA + lane] += u * k2
-                av[5 * SWA + lane] += v * k2
+                av[1 * SW + lane] += v * k0
+                av[2 * SW + lane] += u * k1
+                av[3 * SW + lane] += v * k1
+                av[4 * SW + lane] += u * k2
+                av[5 * SW + lane] += v * k2
                 # depth: zn = (far - z)/(far - near), z = sw / num, num = sum_k wc_k iz_k,
                 # sw = max(sum_k wc_k, wsum_min): with gzr = -dL/dz / num,
                 # dL/dnum = gzr z and dL/dsw = -gzr
@@ -504,36 +490,27 @@ def _backward_tile(
                 gw0 = gw0 if (w0 >= zero) & (w0 <= one) else zero
                 gw1 = gw1 if (w1 >= zero) & (w1 <= one) else zero
                 gw2 = gw2 if (w2 >= zero) & (w2 <= one) else zero
-                av[6 * SWA + lane] += gw0
-                av[7 * SWA + lane] += gw1
-                av[8 * SWA + lane] += gw2
-                av[9 * SWA + lane] += gw0 * py
-                av[10 * SWA + lane] += gw1 * py
-                av[11 * SWA + lane] += gw2 * py
-                av[12 * SWA + lane] += gnum * wc0
-                av[13 * SWA + lane] += gnum * wc1
-                av[14 * SWA + lane] += gnum * wc2
-                av[15 * SWA + lane] += sv[NLOC + lane] * wf
-                av[16 * SWA + lane] += sv[2 * NLOC + lane] * wf
-                av[17 * SWA + lane] += sv[3 * NLOC + lane] * wf
-        pxa = px_tab[ca + u0:]
-        for k in range(3):  # x coefficient of barycentric matrix row k: sum_lanes px * sum_rows gw_k
-            a = ac[(6 + k) * SWA + u0:]
-            grad[entry, 8 + 3 * k] = _group_sum(a[mu:], 0) if False else grad[entry, 8 + 3 * k]
+                av[6 * SW + lane] += gw0
+                av[7 * SW + lane] += gw1
+                av[8 * SW + lane] += gw2
+                av[9 * SW + lane] += gw0 * py
+                av[10 * SW + lane] += gw1 * py
+                av[11 * SW + lane] += gw2 * py
+                av[12 * SW + lane] += gnum * wc0
+                av[13 * SW + lane] += gnum * wc1
+                av[14 * SW + lane] += gnum * wc2
+                av[15 * SW + lane] += sv[NLOC + lane] * wf
+                av[16 * SW + lane] += sv[2 * NLOC + lane] * wf
+                av[17 * SW + lane] += sv[3 * NLOC + lane] * wf
+        pxa = px_tab[ca:]
         for j in range(6):
-            grad[entry, j] = _group_sum(ac[j * SWA + u0:], mu)
+            grad[entry, j] = _lane_sum(ac[j * SW:], m)
         for k in range(3):  # barycentric matrix row k: (x, y, 1) coefficients
-            a = ac[(6 + k) * SWA + u0:]
-            tot = zero
-            for q in range(mu):  # the constant term, before the x term scales the lanes
-                tot += a[q]
-            grad[entry, 8 + 3 * k] = tot
-            for q in range(mu):
-                a[q] *= pxa[q]
-            grad[entry, 6 + 3 * k] = _group_sum(a, mu)
-            grad[entry, 7 + 3 * k] = _group_sum(ac[(9 + k) * SWA + u0:], mu)
+            grad[entry, 6 + 3 * k] = _lane_dot(ac[(6 + k) * SW:], pxa, m)
+            grad[entry, 7 + 3 * k] = _lane_sum(ac[(9 + k) * SW:], m)
+            grad[entry, 8 + 3 * k] = _lane_sum(ac[(6 + k) * SW:], m)
         for j in range(6):
-            grad[entry, 15 + j] = _group_sum(ac[(12 + j) * SWA + u0:], mu)
+            grad[entry, 15 + j] = _lane_sum(ac[(12 + j) * SW:], m)
 
 
 @njit(parallel=True, **_OPTS)
@@ -689,9 +666,9 @@ def _make_bins(cxy: np.ndarray, cfg: _Config) -> _Bins:
     # the dynamic schedule ends with small tiles and the threads finish together
     order = np.argsort(-np.diff(tile_start), kind="stable").astype(np.int64)
     hp, wp = n_ty * TILE_H, n_tx * TILE_W
-    # columns up to wp + 2 LANES: lane groups may run past the last tile's last column
-    k = np.arange(max(hp, wp + 2 * LANES), dtype=np.float64)
-    px_tab = ((2 * k[:wp + 2 * LANES] + 1) / s - 1).astype(cxy.dtype)
+    # columns up to wp + LANES: lane groups may run past the last tile's last column
+    k = np.arange(max(hp, wp + LANES), dtype=np.float64)
+    px_tab = ((2 * k[:wp + LANES] + 1) / s - 1).astype(cxy.dtype)
     py_tab = (1 - (2 * k[:hp] + 1) / s).astype(cxy.dtype)
     return _Bins(box, n_tx, wp, order, tile_start, tile_entry, entry_face, face_start, row_start, px_tab, py_tab)
 
