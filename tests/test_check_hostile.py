@@ -301,6 +301,9 @@ def test_gltf_node_cycle_and_bad_types(tmp_path: Path) -> None:
                       + js + rest)
         return q
 
+    draco = json.loads(json.dumps(doc))
+    draco["extensionsRequired"] = ["KHR_draco_mesh_compression"]
+    only(one_clean_result(check_mesh(save(draco, "draco.glb")), (2,)), "unsupported_format")
     cyc = json.loads(json.dumps(doc))
     cyc["nodes"] = [{"mesh": 0, "children": [1]}, {"children": [0]}]
     one_clean_result(check_mesh(save(cyc, "cyc.glb")), (2,))

@@ -62,7 +62,7 @@ class Payload:
     """Everything a worker needs to run one job; travels to the worker by pickle.
 
     ``files`` maps a path relative to the job's input folder (``design/heights.npy``,
-    ``direct.png``, ``shape.npy``, ``scene.toml``) to its bytes; ``sources``
+    ``direct/rose.png``, ``shape/dome.npy``, ``scene/cup.toml``) to its bytes; ``sources``
     maps those names (and ``design``) to the paths the manifest gave, so that
     messages name the user's files, not the worker's scratch copies.
     """
@@ -183,8 +183,8 @@ def read_inputs(job: JobSpec, root: Path) -> dict[str, bytes]:
             )
         return files
     for role, path in sorted(job.files.items()):
-        suffix = path.suffix.lower() if role != "scene" else ".toml"
-        files[f"{role}{suffix}"] = _read_limited(path, budget, f"{role} file")
+        # role/name: the design records input file names, so keep the user's
+        files[f"{role}/{path.name}"] = _read_limited(path, budget, f"{role} file")
     return files
 
 
@@ -244,11 +244,9 @@ def load_payload(
     if job.design is not None:
         sources = {"design": _shown(job.design, root)}
     else:
-        sources = {}
-        for role, path in job.files.items():
-            sources[next(rel for rel in files if rel.split(".", 1)[0] == role)] = _shown(path, root)
+        sources = {f"{role}/{path.name}": _shown(path, root) for role, path in job.files.items()}
     if job.kind == "raw":
-        by_role = {rel.split(".", 1)[0]: rel for rel in files}
+        by_role = {rel.split("/", 1)[0]: rel for rel in files}
         request = dict(job.design_options)
         for role in ("direct", "reflected", "reflected2", "direct_mask", "reflected_mask", "reflected2_mask"):
             if role in by_role:
@@ -353,7 +351,8 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
                 kw[role] = inp / kw[role]
         for role in ("shape", "scene"):
             if kw.get(role) in payload.files:  # a file the job carries, not a built-in name
-                kw[role] = str(inp / kw[role])
+                # a Path, so that the design folder records the file's name, not the scratch path
+                kw[role] = inp / kw[role]
 
         def progress(name: str, it: int, max_it: int, parts: dict[str, float], elapsed: float) -> None:
             _emit(payload, f"design {name} {it}/{max_it}")

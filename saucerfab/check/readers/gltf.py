@@ -375,4 +375,11 @@ def _load_json(raw: bytes, limits: Limits) -> Any:
     asset = doc.get("asset") if isinstance(doc, dict) else None
     if not isinstance(asset, dict) or not str(asset.get("version", "")).startswith("2"):
         raise ReadError("unsupported_format", "not a glTF 2.0 document (asset.version is not 2.x)")
+    required = doc.get("extensionsRequired", [])
+    if required:
+        # Draco / meshopt compression and the like change what accessors mean; reading them as plain
+        # data would report nonsense, so say plainly that the file needs what the checker lacks
+        names = ", ".join(str(x)[:60] for x in required[:5]) if isinstance(required, list) else "?"
+        raise ReadError("unsupported_format", f"the glTF requires extensions the checker does not read ({names}); "
+                                              "export it without them")
     return doc
