@@ -112,6 +112,7 @@ def run_checks(
         "textures": [t.to_dict() for t in md.textures],
         "texture_px": max((max(t.width or 0, t.height or 0) for t in md.textures), default=None) or None,
         "texture_dpi": None,
+        "texture_detailed_fraction": None,
         "uv_outside_faces": None,
         "coloured_fraction": 0.0,
         "colour": sorted(md.colour_kinds),
@@ -416,7 +417,11 @@ def _thin_walls(bvh: BVH, tri: np.ndarray, normals: np.ndarray, areas: np.ndarra
     stats["thin_wall_fraction"] = round(float(thin.mean()), 5)
     if thin.any():
         sev = "warning"
-        if profile is not None and profile.thin_policy == "refuse":
+        if (
+            profile is not None
+            and profile.thin_policy == "refuse"
+            and float(thin.mean()) >= limits.thin_wall_error_fraction
+        ):
             sev = "error"
         who = f"{profile.name}'s minimum" if profile is not None else "the minimum asked for"
         fi = gidx[f[ok][thin]]
@@ -600,15 +605,26 @@ def _texture_dpi(md: MeshData, areas: np.ndarray, textured: np.ndarray, profile:
     texel_area = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) / 2
     a = areas[idx]
     dpi = 25.4 * np.sqrt(texel_area / a)
-    order = np.argsort(dpi)
-    cum = np.cumsum(a[order])
-    med = float(dpi[order][np.searchsorted(cum, cum[-1] / 2)])
+
+    def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
+        order = np.argsort(values)
+        cum = np.cumsum(weights[order])
+        return float(values[order][min(np.searchsorted(cum, q * cum[-1]), len(order) - 1)])
+
+    # Leave out faces mapped at a deliberately tiny scale (plain walls an
+    # exporter parks on a small patch): they need no resolution. The header
+    # is all the checker decodes, so density is the only clue it has.
+    best = weighted_quantile(dpi, a, 0.95)
+    detailed = dpi >= limits.solid_colour_density * best
+    med = weighted_quantile(dpi[detailed], a[detailed], 0.5)
+    stats["texture_detailed_fraction"] = round(float(a[detailed].sum() / max(a.sum(), 1e-300)), 4)
     stats["texture_dpi"] = round(med, 1)
     if profile is not None:
         want = limits.texture_dpi_fraction * profile.dpi
         if med < want:
             out.append(finding(
                 "texture_low_dpi",
-                f"the texture gives {med:.0f} dpi on the model (area-weighted median), under "
+                f"the texture gives {med:.0f} dpi on the model (area-weighted median over the detailed "
+                f"faces), under "
                 f"{limits.texture_dpi_fraction:g} x {profile.name}'s {profile.dpi:g} dpi; colours will look soft",
             ))

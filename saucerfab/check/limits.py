@@ -60,8 +60,17 @@ class Limits:
             the check is marked partial.
         min_wall_mm: wall thickness to warn under when no printer is given
             (``None``: only report the estimate).
+        thin_wall_error_fraction: under a ``refuse`` profile, thin walls are
+            an error only when at least this share of the sampled surface is
+            thin; fewer thin samples are isolated spots (a spike, the wedge
+            where a sloping top meets a side wall) that a printer blunts, and
+            are reported as a warning with their place.
         texture_dpi_fraction: warn when the texture's resolution on the
             model is below this fraction of the printer's dpi.
+        solid_colour_density: faces whose texels per mm are below this
+            fraction of the best-resolved faces' (95th percentile by area)
+            are taken as solid-colour faces (an exporter maps plain walls to
+            a tiny patch on purpose) and left out of the dpi median.
         plausible_size_mm: (smallest, largest) plausible largest extent of a
             model in millimetres; outside it a unit warning is given.
         uv_tolerance: how far outside [0, 1] a texture coordinate may stray
@@ -90,7 +99,9 @@ class Limits:
     max_ray_tests: int = 20_000_000
     max_pair_tests: int = 500_000_000
     min_wall_mm: float | None = None
+    thin_wall_error_fraction: float = 0.005
     texture_dpi_fraction: float = 0.5
+    solid_colour_density: float = 0.1
     plausible_size_mm: tuple[float, float] = (5.0, 5000.0)
     uv_tolerance: float = 1e-4
     manifold3d_crosscheck: bool = False

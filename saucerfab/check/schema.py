@@ -65,6 +65,7 @@ STATS_SCHEMA: dict[str, Any] = {
         },
         "texture_px": _INT_OR_NULL,
         "texture_dpi": _NUM_OR_NULL,
+        "texture_detailed_fraction": _NUM_OR_NULL,
         "uv_outside_faces": _INT_OR_NULL,
         "coloured_fraction": {"type": "number", "minimum": 0, "maximum": 1},
         "colour": {"type": "array", "items": {"enum": ["texture", "vertex", "face", "material"]}},
