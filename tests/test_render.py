@@ -74,11 +74,11 @@ def _loss_grads(fn, v, f, c, cam, kw, seed=0):
     v = v.clone().requires_grad_(True)
     c = c.clone().requires_grad_(True)
     image, alpha = fn(v, f, c, cam, **kw)
-    g = torch.Generator().manual_seed(seed)
-    wi = torch.rand(image.shape, generator=g, dtype=image.dtype)
-    wa = torch.rand(alpha.shape, generator=g, dtype=alpha.dtype)
+    g = torch.Generator().manual_seed(seed)  # CPU weights, the same for every device
+    wi = torch.rand(image.shape, generator=g, dtype=image.dtype).to(image.device)
+    wa = torch.rand(alpha.shape, generator=g, dtype=alpha.dtype).to(alpha.device)
     gv, gc = torch.autograd.grad((image * wi).sum() + (alpha * wa).sum(), (v, c))
-    return image.detach(), alpha.detach(), gv, gc
+    return image.detach().cpu(), alpha.detach().cpu(), gv.cpu(), gc.cpu()
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -224,9 +224,9 @@ def test_gpu_dispatch_matches_cpu() -> None:
     cam = ndc_camera(16)
     kw = SETTINGS[1]
     cpu = _loss_grads(lambda *a, **k: soft_rasterize(*a, backend="numba", **k), v, f, c, cam, kw)
-    gpu = _loss_grads(soft_rasterize, v.cuda(), f.cuda(), c.cuda(), cam, kw)
+    gpu = _loss_grads(soft_rasterize, v.cuda(), f.cuda(), c.cuda(), cam, kw)  # "auto": the torch backend
     for r, o in zip(cpu, gpu):
-        np.testing.assert_allclose(o.cpu().numpy(), r.numpy(), atol=1e-9 * max(1.0, float(r.abs().max())))
+        np.testing.assert_allclose(o.numpy(), r.numpy(), atol=1e-9 * max(1.0, float(r.abs().max())))
     with pytest.raises(ConfigError, match="CPU"):
         soft_rasterize(v.cuda(), f.cuda(), c.cuda(), cam, backend="numba")
 

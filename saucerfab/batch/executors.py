@@ -196,7 +196,9 @@ class DaskEngine:
     Stage events travel as worker events (``log_event`` / ``subscribe_topic``).
     A worker that dies is handled by the scheduler (the task is retried
     elsewhere up to its ``allowed-failures``); a job it gives up on is
-    recorded as failed.
+    started once more, then recorded as failed. In a worker process with
+    several threads, designs run one at a time (see ``jobs._DESIGN_LOCK``);
+    one thread per worker process (``--nthreads 1``) uses a machine best.
     """
 
     scratch_in_output = False

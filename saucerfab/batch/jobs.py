@@ -23,15 +23,17 @@ folder keeps the keys), the printer profile's values and the job's parameters.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import shutil
 import socket
 import tempfile
+import threading
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -302,20 +304,27 @@ def _emit(payload: Payload, stage: str) -> None:
         pass
 
 
-def _limit_threads(n: int, need_torch: bool) -> int | None:
-    """One job, ``n`` torch threads: workers run side by side without oversubscribing
-    the cores, and a design does not depend on the machine's core count.
-    Returns the previous count (None if torch is not in use)."""
-    import sys
+#: one design at a time per process: its previews use matplotlib, which is not
+#: thread-safe, and torch's thread count is process-wide (a threaded Dask worker
+#: runs several jobs in one process; exports and checks still run side by side)
+_DESIGN_LOCK = threading.Lock()
 
-    if not (need_torch or "torch" in sys.modules):
-        return None
+
+@contextlib.contextmanager
+def _torch_threads(n: int) -> Iterator[None]:
+    """``n`` torch threads for one design: workers run side by side without
+    oversubscribing the cores, and a design does not depend on the machine's
+    core count. The caller's setting is restored afterwards."""
     import torch
 
     before = torch.get_num_threads()
     if before != n:
         torch.set_num_threads(n)
-    return before
+    try:
+        yield
+    finally:
+        if torch.get_num_threads() != before:
+            torch.set_num_threads(before)
 
 
 def _collect(folder: Path, prefix: str) -> dict[str, bytes]:
@@ -341,7 +350,6 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
     if payload.kind == "raw":
         stage[0] = "design"
         _emit(payload, "design")
-        t = time.perf_counter()
         from saucerfab.optimize.pipeline import run_design
         from saucerfab.optimize.request import DesignRequest
 
@@ -357,8 +365,11 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
         def progress(name: str, it: int, max_it: int, parts: dict[str, float], elapsed: float) -> None:
             _emit(payload, f"design {name} {it}/{max_it}")
 
-        design_dir = Path(run_design(DesignRequest(**kw), out / "design", progress=progress))
-        times["design"] = time.perf_counter() - t
+        request = DesignRequest(**kw)
+        with _DESIGN_LOCK, _torch_threads(payload.threads):
+            t = time.perf_counter()
+            design_dir = Path(run_design(request, out / "design", progress=progress))
+            times["design"] = time.perf_counter() - t
         files.update(_collect(design_dir, "design"))
     else:
         design_dir = inp / "design"
@@ -479,7 +490,6 @@ def execute(payload: Payload) -> JobResult:
     t0 = time.perf_counter()
     times: dict[str, float] = {}
     stage = ["inputs"]
-    threads_before = _limit_threads(payload.threads, payload.kind == "raw")
     root = payload.scratch_root
     if root is not None:
         Path(root).mkdir(parents=True, exist_ok=True)
@@ -503,10 +513,6 @@ def execute(payload: Payload) -> JobResult:
         )
     finally:
         shutil.rmtree(work, ignore_errors=True)
-        if threads_before is not None and threads_before != payload.threads:
-            import torch  # give a caller's process (--workers 0, a threaded Dask worker) its setting back
-
-            torch.set_num_threads(threads_before)
     if res.reason:
         res.reason = _user_paths(res.reason, payload, work)
     if res.trace:

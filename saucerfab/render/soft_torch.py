@@ -5,7 +5,7 @@ the influence radius ``sqrt(log(1/dist_eps - 1) * sigma)``; the SoftRas
 formulas of :mod:`saucerfab.render.soft` are evaluated on those pairs as flat
 tensors and aggregated per pixel with ``index_add``/``scatter_reduce``.
 Autograd gives the gradients. Its cost and memory grow with the number of
-pairs (about 7.7 M for the paper's two views at ``sigma = 1e-5``); it is the
+pairs (5.4 M for the paper's two views at ``sigma = 1e-5``); it is the
 comparison for the compiled CPU kernels and the path for CUDA tensors.
 """
 
