@@ -427,6 +427,8 @@ def _parameters(request: DesignRequest, weights: dict[str, float], rho: float) -
     for k, v in list(d.items()):
         if isinstance(v, Path):
             d[k] = v.name
+        elif k in ("shape", "scene") and isinstance(v, str) and Path(v).suffix.lower() in (".png", ".npy", ".toml"):
+            d[k] = Path(v).name  # a file's name, not the machine's path to it
     d["weights_used"] = weights
     d["rho"] = rho
     d["stages"] = [asdict(s) for s in ABLATION_STAGES[request.ablation]]
