@@ -98,3 +98,16 @@ def test_ctrl_c_keeps_a_checkpoint_and_resume_gives_the_same_design(small_design
     run_design(req, out, progress=lambda *a: None)
     assert not (tmp_path / ".design.checkpoint").exists()
     assert np.array_equal(np.load(out / "heights.npy"), np.load(reference / "heights.npy"))
+
+
+def test_without_times_the_design_folder_is_byte_identical(tmp_path) -> None:  # noqa: ANN001
+    req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png",
+                        resolution=16, image_size=48, max_iters=8, record_times=False)
+    a, b = tmp_path / "a", tmp_path / "b"
+    run_design(req, a, progress=lambda *x: None)
+    run_design(req, b, progress=lambda *x: None)
+    files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
+    for rel in files:
+        assert (a / rel).read_bytes() == (b / rel).read_bytes(), rel
+    assert "total_s" not in json.loads((a / "design.json").read_text())["metrics"]

@@ -365,6 +365,8 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
         def progress(name: str, it: int, max_it: int, parts: dict[str, float], elapsed: float) -> None:
             _emit(payload, f"design {name} {it}/{max_it}")
 
+        # no wall-clock times in the design folder: a job's outputs are byte-identical run to run
+        kw.setdefault("record_times", False)
         request = DesignRequest(**kw)
         with _DESIGN_LOCK, _torch_threads(payload.threads):
             t = time.perf_counter()

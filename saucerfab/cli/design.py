@@ -57,6 +57,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=["gray", "projected"],
         help="starting face colours: grey (the paper) or projected from the enhanced targets (Fig. 12 c)",
     )
+    p.add_argument(
+        "--no-times",
+        action="store_true",
+        help="leave wall-clock times out of the design folder (byte-identical reruns)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
@@ -87,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
         frames=args.frames,
         prism_placement=args.prism_placement,
         color_init=args.color_init,
+        record_times=not args.no_times,
     )
     quiet = (lambda *a: None) if args.quiet else None
     out = run_design(req, args.out, progress=quiet)
@@ -97,13 +103,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {out}")
     for st in m.get("stages", []):
         print(
-            f"  {st['name']:22s} {st['iterations']:4d} it  {st['seconds']:6.1f} s  "
+            f"  {st['name']:22s} {st['iterations']:4d} it  {st.get('seconds', float('nan')):6.1f} s  "
             f"E_visual {st['E_visual']:10.1f}  E_deform {st['E_deform']:.4f}  "
             f"conflict {100 * st['conflict_fraction']:.1f}%"
         )
     print(
         f"  final E_visual {m.get('E_visual_final', float('nan')):.1f}, max |h - z| "
-        f"{m['max_abs_height_change']:.4f} (delta {meta['scene']['saucer']['delta']}), total {m['total_s']:.1f} s"
+        f"{m['max_abs_height_change']:.4f} (delta {meta['scene']['saucer']['delta']}), total {m.get('total_s', float('nan')):.1f} s"
     )
     print(f"  previews: {out / 'previews'}")
     return 0

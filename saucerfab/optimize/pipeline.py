@@ -334,7 +334,10 @@ def run_design(
 
         def cb(it: int, total: float, parts: dict[str, float], _name: str = spec.name) -> None:
             now = time.perf_counter()
-            log.append({"stage": _name, "iteration": it, "time_s": now - t_start, **parts})
+            entry = {"stage": _name, "iteration": it, **parts}
+            if request.record_times:
+                entry["time_s"] = now - t_start
+            log.append(entry)
             if now - last[0] >= log_every_s:
                 last[0] = now
                 progress(_name, it, request.max_iters, parts, now - stage_t0)
@@ -416,10 +419,24 @@ def run_design(
     metrics.update(final_metrics)
     metrics["previews_s"] = time.perf_counter() - t0
     metrics["total_s"] = time.perf_counter() - t_start
+    if not request.record_times:
+        _drop_times(metrics)
     energy_log = "\n".join(json.dumps(e) for e in log).encode() + b"\n"
     save_design(design, out, previews=previews, extra_files={"energy_log.jsonl": energy_log})
     ckpt.clear()
     return out
+
+
+_TIME_KEYS = ("setup_s", "texturing_s", "previews_s", "total_s", "seconds", "seconds_per_iteration")
+
+
+def _drop_times(metrics: dict[str, Any]) -> None:
+    """Remove wall-clock times (in place), so the design folder is reproducible byte for byte."""
+    for key in _TIME_KEYS:
+        metrics.pop(key, None)
+    for st in metrics.get("stages", []):
+        for key in _TIME_KEYS:
+            st.pop(key, None)
 
 
 def _parameters(request: DesignRequest, weights: dict[str, float], rho: float) -> dict[str, Any]:

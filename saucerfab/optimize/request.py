@@ -42,6 +42,10 @@ class DesignRequest:
             (each face coloured from the enhanced targets by the texturing
             step, the paper's Figure 12 (c), which it reports as comparable;
             it skips the first iterations' colour fitting).
+        record_times: write wall-clock times into the design folder
+            (design.json metrics, the energy log, the energies plot's axis).
+            False makes the folder byte-identical run to run, as batch jobs
+            need; the plot is then over iterations.
         prism_placement: with a second reflected image, "auto" turns the
             prism to the placement whose facet regions overlap least
             (:func:`saucerfab.optimize.regions.best_placement`); "as_given"
@@ -70,6 +74,7 @@ class DesignRequest:
     frames: str = "scene"
     prism_placement: str = "auto"
     color_init: str = "gray"
+    record_times: bool = True
     extra: dict[str, Any] = field(default_factory=dict)
 
     ABLATIONS = ("full", "no_deform", "laplacian", "laplacian_bw", "sparse_only", "laplacian_sparse")
