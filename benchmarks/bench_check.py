@@ -1,6 +1,6 @@
 """Benchmark: ``saucerfab check`` on a 100,000-triangle textured 3MF (target: <= 2 s) and its start-up.
 
-    .venv/bin/python benchmarks/bench_check.py [--runs 5] [--n 159] [--out benchmarks/results_check.md]
+    .venv/bin/python benchmarks/bench_check.py [--runs 5] [--n 159] [--out benchmarks/results/check.md]
 
 The file is a closed saucer-like solid (wavy heightfield top, flat base,
 vertical sides; 4 (n-1)^2 + 8 (n-1) = 101,120 triangles at n = 159) with a

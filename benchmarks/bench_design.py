@@ -55,6 +55,7 @@ def one(ablation: str, args: argparse.Namespace, tmp: Path) -> dict:
         max_iters=args.max_iters,
         ablation=ablation,
         frames=args.frames,
+        barrier_weight=args.barrier_weight,
     )
     t0 = time.perf_counter()
     out = run_design(req, tmp / ablation, progress=lambda *a: None)
@@ -69,14 +70,18 @@ def main() -> int:
     p.add_argument("--image-size", type=int, default=512)
     p.add_argument("--max-iters", type=int, default=400)
     p.add_argument("--frames", default="contain")
+    p.add_argument("--barrier-weight", type=float, default=0.01)
     p.add_argument("--ablation", action="store_true", help="also run Figure 11's six settings")
     p.add_argument("--keep", help="copy the design folders here")
+    p.add_argument("--settings", default="no_deform,laplacian,laplacian_bw,sparse_only,laplacian_sparse",
+                   help="ablation settings to run besides full (comma-separated)")
     args = p.parse_args()
     print(f"machine: {machine()}")
     print(f"size: {args.resolution}x{args.resolution} heightfield, {args.image_size}px views, "
-          f"max {args.max_iters} iterations per stage, frames={args.frames}")
+          f"max {args.max_iters} iterations per stage, frames={args.frames}, barrier weight {args.barrier_weight}")
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(args.keep) if args.keep else Path(d)
+        print(flush=True)
         full = one("full", args, tmp)
         m = full["metrics"]
         print(f"\nfull design: {full['wall_s']:.1f} s wall (setup {m['setup_s']:.1f} s, texturing "
@@ -90,7 +95,7 @@ def main() -> int:
               f"max |h - z| {m['max_abs_height_change']:.4f}")
         if args.ablation:
             rows = [full]
-            for ab in ("no_deform", "laplacian", "laplacian_bw", "sparse_only", "laplacian_sparse"):
+            for ab in args.settings.split(","):
                 rows.append(one(ab, args, tmp))
             print("\nablation (Figure 11), E_visual = eq. 2 on hard textured renders:")
             print(f"{'setting':18s} {'E_visual':>10s} {'direct':>9s} {'reflected':>9s} {'E_deform':>9s} {'wall s':>7s}")

@@ -7,7 +7,7 @@ against the plain per-vertex Python loop :func:`reflect_point_reference`
 subset and scaled up to the whole grid. Also times Eberly's quartic for the
 circle. Checks on the way that the fast and slow results agree.
 
-    .venv/bin/python benchmarks/bench_mirror.py [--resolution 150] [--write benchmarks/results_mirror.md]
+    .venv/bin/python benchmarks/bench_mirror.py [--resolution 150] [--write benchmarks/results/mirror.md]
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ Usage::
 
     .venv/bin/python benchmarks/bench_render.py [--repeat 7] [--torch-repeat 2] [--write]
 
-``--write`` records the table in ``benchmarks/results_render.md``.
+``--write`` records the table in ``benchmarks/results/render.md``.
 """
 
 from __future__ import annotations
@@ -143,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=7, help="timed numba iterations per sigma")
     ap.add_argument("--torch-repeat", type=int, default=2, help="timed torch iterations per sigma")
     ap.add_argument("--sigmas", type=float, nargs="+", default=[1e-5, 1e-7])
-    ap.add_argument("--write", action="store_true", help="write benchmarks/results_render.md")
+    ap.add_argument("--write", action="store_true", help="write benchmarks/results/render.md")
     args = ap.parse_args(argv)
 
     heights, views, colors, note = build_problem()
@@ -204,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     text = report(rows, note, args)
     print(text)
     if args.write:
-        out = Path(__file__).with_name("results_render.md")
+        out = Path(__file__).parent / "results" / "render.md"
         out.write_text(text)
         print(f"wrote {out}")
     return 0
