@@ -6,8 +6,7 @@
    ``samples/reflected_star.png`` in the cup, on the ``waves`` base shape,
    at the paper's full size (150 x 150, 512 x 512) unless ``--quick``;
 2. ``saucerfab export`` of that design for the Stratasys J55 at an 80 mm cup
-   as 3MF, OBJ, PLY and VRML (the formats GrabCAD Print takes), and for a
-   generic bureau as GLB (a web-viewable copy);
+   as 3MF, OBJ, PLY and VRML (the formats GrabCAD Print takes);
 3. ``saucerfab check`` of every written file.
 
 Each step is the CLI itself, called in-process, so the demo shows exactly
@@ -52,13 +51,6 @@ def run(argv: list[str] | None = None) -> int:
             "--formats", "3mf,obj,ply,wrl",
             "--out", str(out / "print"),
         ],
-        [
-            "export", str(out / "design"),
-            "--printer", "bureau",
-            "--cup-diameter-mm", "80",
-            "--formats", "glb",
-            "--out", str(out / "web"),
-        ],
     ]
     t0 = time.perf_counter()
     for step in steps:
@@ -69,7 +61,7 @@ def run(argv: list[str] | None = None) -> int:
             return rc
     files = sorted(
         str(f)
-        for folder in ("print", "web")
+        for folder in ("print",)
         for f in (out / folder).rglob("*")
         if f.suffix.lower() in (".3mf", ".glb", ".ply", ".wrl", ".obj")
     )
