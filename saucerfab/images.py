@@ -816,8 +816,12 @@ def prepare_image(
     background: Sequence[float] | str | None = None,
     max_pixels: int = DEFAULT_MAX_PIXELS,
     max_bytes: int = DEFAULT_MAX_BYTES,
+    loaded: LoadedImage | None = None,
 ) -> ViewImage:
     """Load, fit into the ``size`` x ``size`` frame and mask one input image.
+
+    ``loaded``: the image already decoded from ``path`` (by :func:`load_image`),
+    so a caller that also fits it at another size decodes the file once.
 
     The mask is computed in the fitted frame (so the morphology's pixel
     sizes are relative to the frame the optimizer uses). See
@@ -828,7 +832,7 @@ def prepare_image(
     """
     from saucerfab.design import sha256_file
 
-    img = load_image(path, max_pixels=max_pixels, max_bytes=max_bytes)
+    img = loaded if loaded is not None else load_image(path, max_pixels=max_pixels, max_bytes=max_bytes)
     bg = estimate_background(img.rgb, img.alpha) if background is None else parse_colour(background)
     rgb, alpha, fill = fit_square(img, size, background=bg)
     mask, source = _mask_in_frame(

@@ -111,3 +111,25 @@ def test_without_times_the_design_folder_is_byte_identical(tmp_path) -> None:  #
     for rel in files:
         assert (a / rel).read_bytes() == (b / rel).read_bytes(), rel
     assert "total_s" not in json.loads((a / "design.json").read_text())["metrics"]
+
+
+def test_an_unrelated_output_folder_or_file_is_never_replaced(tmp_path) -> None:  # noqa: ANN001
+    from saucerfab.errors import ConfigError
+
+    req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png",
+                        resolution=8, image_size=16, max_iters=2)
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "thesis.txt").write_text("precious")
+    with pytest.raises(ConfigError, match="not a design folder"):
+        run_design(req, folder)
+    assert (folder / "thesis.txt").read_text() == "precious"
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("keep")
+    with pytest.raises(ConfigError, match="existing file"):
+        run_design(req, a_file)
+    assert a_file.read_text() == "keep"
+    # an earlier design folder is replaced, as a rerun should
+    run_design(req, tmp_path / "d", progress=lambda *a: None)
+    run_design(req, tmp_path / "d", progress=lambda *a: None)
+    assert (tmp_path / "d" / "design.json").is_file()

@@ -524,7 +524,7 @@ def _units_check(md: MeshData, size: np.ndarray, limits: Limits, out: list[Findi
         out.append(finding(
             "units_suspect",
             f"the model is {big:,.0f} mm across (read in {unit}); "
-            + (f"glTF is in metres by specification - if it was written in millimetres, scale it by 0.001"
+            + ("glTF is in metres by specification - if it was written in millimetres, scale it by 0.001"
                if md.format in ("glb", "gltf") else "was it written in microns or with a wrong unit?"),
         ))
 

@@ -129,11 +129,12 @@ def prepare(request: DesignRequest) -> Prepared:
         path = paths[name]
         if path is None:  # pragma: no cover - names only lists given images
             continue
-        view = im.prepare_image(path, s, mask_path=mask_paths[name])
+        loaded = im.load_image(path)  # decoded once, fitted at two sizes
+        view = im.prepare_image(path, s, mask_path=mask_paths[name], loaded=loaded)
         render[name] = view.flattened()
         masks[name] = view.mask
         # the texture keeps more of the input's detail than the render size
-        rgb_t, alpha_t, _ = im.fit_square(im.load_image(path), t, background=view.background)
+        rgb_t, alpha_t, _ = im.fit_square(loaded, t, background=view.background)
         texture[name] = rgb_t if alpha_t is None else im.flatten_alpha(rgb_t, alpha_t, view.background)
         inputs[name] = {"file": Path(path).name, "sha256": view.sha256, "mask_source": view.mask_source}
         if view.notes:
@@ -151,6 +152,24 @@ def prepare(request: DesignRequest) -> Prepared:
         e = im.solid_colour_targets([masks[k] for k in names])
         enhanced = dict(zip(names, e))
     return Prepared(scene, base, render, texture, enhanced, masks, inputs, groups, placement or None)
+
+
+def check_output_folder(out: Path) -> None:
+    """Refuse, before any work, an output path whose replacement would lose a user's data.
+
+    The design folder is written atomically and replaces ``out`` when done;
+    that is only safe when ``out`` does not exist, is an empty folder, or is
+    an earlier design folder (it holds ``design.json``).
+    """
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise ConfigError(f"--out {str(out)!r} is an existing file; give a new or empty folder for the design")
+    if any(out.iterdir()) and not (out / "design.json").is_file():
+        raise ConfigError(
+            f"--out {str(out)!r} is a non-empty folder that is not a design folder; saucerfab would "
+            "replace it. Give a new or empty folder, or remove it first"
+        )
 
 
 def request_hash(request: DesignRequest, prepared: Prepared) -> str:
@@ -249,6 +268,7 @@ def run_design(
 
     out = Path(out)
     t_start = time.perf_counter()
+    check_output_folder(out)
     prep = prepare(request)
     progress = progress or _print_progress
     torch.manual_seed(request.seed)

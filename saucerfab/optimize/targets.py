@@ -31,17 +31,12 @@ def sample_bilinear(image: np.ndarray, px: np.ndarray) -> np.ndarray:
     Returns:
         (..., C) float64.
     """
+    from saucerfab.render.hard import sample_texture
+
     h, w = image.shape[:2]
-    x = np.clip(px[..., 0] - 0.5, 0, w - 1)
-    y = np.clip(px[..., 1] - 0.5, 0, h - 1)
-    x0 = np.minimum(np.floor(x).astype(np.int64), w - 2 if w > 1 else 0)
-    y0 = np.minimum(np.floor(y).astype(np.int64), h - 2 if h > 1 else 0)
-    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
-    tx, ty = (x - x0)[..., None], (y - y0)[..., None]
-    img = image.astype(np.float64)
-    top = img[y0, x0] * (1 - tx) + img[y0, x1] * tx
-    bot = img[y1, x0] * (1 - tx) + img[y1, x1] * tx
-    return top * (1 - ty) + bot * ty
+    # the same lookup as the renderer's, in its UV convention (v up)
+    uv = np.stack([px[..., 0] / w, 1.0 - px[..., 1] / h], axis=-1)
+    return sample_texture(np.asarray(image, np.float64), uv)
 
 
 def project_colors(
