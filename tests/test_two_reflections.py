@@ -118,3 +118,32 @@ def test_two_reflection_design_shows_three_recognisable_views(tmp_path) -> None:
     sj = json.loads((tmp_path / "print" / "scene.json").read_text())
     assert sj["cup"]["shape"] == "prism" and sj["cup"]["sides"] == 6
     assert set(sj["views"]) == {"direct", "reflected", "reflected2"}
+
+
+def test_elliptic_cup_design_goes_through_to_a_printable_export(tmp_path) -> None:  # noqa: ANN001
+    import json
+
+    from saucerfab.check import check_mesh
+    from saucerfab.design import load_design
+    from saucerfab.fabricate.options import FabOptions
+    from saucerfab.fabricate.pipeline import export_design
+    from saucerfab.optimize.pipeline import run_design
+    from saucerfab.optimize.request import DesignRequest
+
+    out = tmp_path / "ellipse"
+    req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", cup="ellipse:0.45,0.35,10",
+                        resolution=24, image_size=64, max_iters=10)
+    run_design(req, out, progress=lambda *a: None)
+    d = load_design(out)
+    assert d.scene.cup.kind == "ellipse"
+    # the reflection in the elliptic mirror reaches the reflected view
+    from PIL import Image
+
+    refl = np.asarray(Image.open(out / "previews" / "reflected_view.png").convert("RGB"), float) / 255
+    assert (np.abs(refl - 1.0).max(axis=-1) > 0.25).mean() > 0.05
+    res = export_design(out, tmp_path / "print", printer="j55", cup_diameter_mm=80, formats=["3mf"],
+                        options=FabOptions(texture_px=256))
+    report = check_mesh(res.files["3mf"][0])
+    assert not [f for f in report.findings if f.severity == "error"], [f.message for f in report.findings]
+    sj = json.loads((tmp_path / "print" / "scene.json").read_text())
+    assert sj["cup"]["shape"] == "ellipse" and sj["cup"]["rotation_deg"] == 10.0
