@@ -40,7 +40,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numba import njit, prange
+from numba import get_parallel_chunksize, njit, prange, set_parallel_chunksize
 
 from saucerfab.render._simd import ftz_on, ftz_restore, vexp
 from saucerfab.render.soft import DET_EPS, WSUM_EPS, distance_threshold
@@ -306,6 +306,12 @@ def _forward(
     order, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab,
     K, image, alpha, st_m, st_s, st_p, row_lo, row_hi,
 ):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    # chunks of one tile, dealt as threads come free: numba's default gives each
+    # thread one contiguous share, which with the busiest-first order hands one
+    # thread nearly all the work. (A `with parallel_chunksize` block would do
+    # the same but cannot be cached.)
+    saved = get_parallel_chunksize()
+    set_parallel_chunksize(1)
     for k in prange(order.shape[0]):
         old = ftz_on()
         _forward_tile(
@@ -313,6 +319,7 @@ def _forward(
             px_tab, py_tab, K, image, alpha, st_m, st_s, st_p, row_lo, row_hi,
         )
         ftz_restore(old)
+    set_parallel_chunksize(saved)
 
 
 # --------------------------------------------------------------------------- backward
@@ -518,6 +525,8 @@ def _backward(
     order, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab,
     K, image, g_image, g_alpha, st_m, st_s, st_p, row_lo, row_hi, grad,
 ):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    saved = get_parallel_chunksize()
+    set_parallel_chunksize(1)  # one tile per chunk, as in _forward
     for k in prange(order.shape[0]):
         old = ftz_on()
         _backward_tile(
@@ -525,6 +534,7 @@ def _backward(
             px_tab, py_tab, K, image, g_image, g_alpha, st_m, st_s, st_p, row_lo, row_hi, grad,
         )
         ftz_restore(old)
+    set_parallel_chunksize(saved)
 
 
 # --------------------------------------------------------------------------- per-face setup and chain rule
