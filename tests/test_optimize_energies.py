@@ -88,7 +88,8 @@ def _quadratic_problem(n: int = 16, seed: int = 0):
     return objective, target_h, target_c
 
 
-def test_solver_keeps_every_iterate_strictly_feasible() -> None:
+@pytest.mark.parametrize("rule", ["global", "coordinate"])
+def test_solver_keeps_every_iterate_strictly_feasible(rule: str) -> None:
     objective, target_h, _ = _quadratic_problem()
     z = torch.zeros_like(target_h)
     c0 = torch.full((target_h.shape[0], 3), 0.5, dtype=torch.float64)
@@ -98,7 +99,8 @@ def test_solver_keeps_every_iterate_strictly_feasible() -> None:
         seen.append(total)
 
     delta = 0.05
-    res = solve(objective, z.clone(), c0, z, delta, SolverSettings(max_iters=300, lr_h=0.01, lr_c=0.05), callback=cb)
+    settings = SolverSettings(max_iters=300, lr_h=0.01, lr_c=0.05, boundary_rule=rule)
+    res = solve(objective, z.clone(), c0, z, delta, settings, callback=cb)
     assert feasible(res.h, z, res.c, delta)
     assert (res.h - z).abs().max() < delta
     # the energy never goes up (Armijo) and the unconstrained targets are approached
@@ -110,6 +112,42 @@ def test_solver_keeps_every_iterate_strictly_feasible() -> None:
     # targets beyond the bound push the heights against it, never past
     outside = target_h.abs() > delta
     assert ((res.h[outside] - z[outside]).abs() > 0.8 * delta).all()
+
+
+def test_coordinate_rule_is_not_held_back_by_a_vertex_at_its_bound() -> None:
+    # Vertex 0 rests 1e-8 from its bound and is pulled further out; the others
+    # start at 0 with targets well inside. The global rule caps every step at
+    # that 1e-8 (the sparse stage's stall); the coordinate rule caps only vertex 0.
+    n, delta = 8, 0.05
+    target = torch.full((n,), 0.03, dtype=torch.float64)
+    target[0] = 1.0
+
+    def objective(h: torch.Tensor, c: torch.Tensor):
+        return ((h - target) ** 2).sum() + ((c - 0.5) ** 2).sum(), {}
+
+    z = torch.zeros(n, dtype=torch.float64)
+    h0 = z.clone()
+    h0[0] = delta - 1e-8
+    c0 = torch.full((n, 3), 0.5, dtype=torch.float64)
+    moved = {}
+    for rule in ("global", "coordinate"):
+        res = solve(objective, h0, c0, z, delta, SolverSettings(max_iters=60, lr_h=0.005, boundary_rule=rule))
+        assert feasible(res.h, z, res.c, delta)
+        moved[rule] = float(res.h[1:].mean())
+    assert 0.02 < moved["coordinate"] < 0.0301
+    assert moved["global"] < 1e-5
+
+
+def test_solver_stops_on_a_nonfinite_gradient() -> None:
+    def objective(h: torch.Tensor, c: torch.Tensor):
+        # the value is finite, the gradient of h is NaN (sqrt at 0)
+        return (h.abs() * 0).sqrt().sum() + ((c - 0.5) ** 2).sum(), {}
+
+    z = torch.zeros(4, dtype=torch.float64)
+    c0 = torch.full((4, 3), 0.4, dtype=torch.float64)
+    res = solve(objective, z.clone(), c0, z, 0.05, SolverSettings(max_iters=20))
+    assert res.stop_reason == "nonfinite_gradient" and res.iterations == 1
+    assert torch.equal(res.h, z)
 
 
 def test_solver_rejects_infeasible_start() -> None:

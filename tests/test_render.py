@@ -257,3 +257,31 @@ def test_bad_arguments(change: dict, match: str) -> None:
     kw = {k: v for k, v in change.items() if k not in args}
     with pytest.raises(ConfigError, match=match):
         soft_rasterize(**args, **kw)  # type: ignore[arg-type]
+
+
+def test_sliver_face_gives_finite_gradients() -> None:
+    """A near-degenerate face (det -1.1e-8 in NDC, float32): its barycentric matrix
+    has entries near 1e6, and for pixels in its influence range the clipped float32
+    barycentrics can all be 0, so the depth is inf there. Such pixels are masked out
+    of the colour; the backward must not turn 0 * inf into NaN. The corners are the
+    projected ones (x, y in NDC, depth) of the face where a full-size design met
+    it: three NaN heights stopped the stage at once."""
+    from saucerfab.render.soft_numba import _Config, _function
+
+    proj64 = torch.tensor(
+        [[0.6611913, -0.7917993, 7.4207783], [0.6698888, -0.7778158, 7.423933], [0.67737514, -0.76578087, 7.414729]],
+        dtype=torch.float32,
+    ).double()
+    f = torch.tensor([[0, 1, 2]])
+    cfg = _Config(512, 1e-5, 1e-4, (1.0, 1.0, 1.0), 1.0, 100.0, 1e-3, 1e-4)
+    grads = {}
+    for dtype in (torch.float32, torch.float64):
+        proj = proj64.to(dtype).requires_grad_(True)
+        col = torch.full((1, 3), 0.3, dtype=dtype, requires_grad=True)
+        image, alpha = _function().apply(proj, col, f, cfg)
+        ((image - 0.8) ** 2).sum().add((alpha**2).sum()).backward()
+        assert torch.isfinite(proj.grad).all() and torch.isfinite(col.grad).all(), dtype
+        grads[dtype] = proj.grad.double()
+    # float32 against float64 on the x, y gradients (the depth's is ~0 here)
+    scale = grads[torch.float64][:, :2].abs().max()
+    assert (grads[torch.float32][:, :2] - grads[torch.float64][:, :2]).abs().max() <= 0.05 * scale

@@ -366,6 +366,8 @@ def run_design(
             max_iters=request.max_iters,
             lr_h=delta / 20,
             energy_floor=mu * barrier_floor(rig.num_vertices, rig.num_faces, delta),
+            # the sparse stage starts with vertices resting on their bounds (solver, item 4)
+            boundary_rule="coordinate" if prox is not None else "global",
         )
         try:
             res = solve(objective, h, c, z, delta, settings, prox=prox, callback=cb)
