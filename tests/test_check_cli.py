@@ -235,3 +235,22 @@ def test_readme_lists_every_finding_code() -> None:
     text = (Path(__file__).resolve().parents[1] / "saucerfab" / "check" / "README.md").read_text()
     for code, (kind, meaning) in CODES.items():
         assert f"| `{code}` | {kind} | {meaning} |" in text, code
+
+
+def test_table_names_a_location_once() -> None:
+    import io
+
+    from rich.console import Console
+
+    from saucerfab.check.report import Finding, Report
+
+    named = Finding("warning", "thin_walls", "thinnest 0.773 mm at (60.93, 74.92, 18.50) mm", {"point_mm": [60.93, 74.92, 18.5]})
+    unnamed = Finding("error", "not_watertight", "3 open edges", {"point_mm": [1.0, 2.0, 3.0]})
+    buf = io.StringIO()
+    report = Report.build("a.3mf", "3mf", [named, unnamed], {})
+    from saucerfab.check.report import render_table
+
+    render_table([report], console=Console(file=buf, width=300, highlight=False))
+    text = buf.getvalue()
+    assert text.count("(60.93, 74.92, 18.50) mm") == 1
+    assert "3 open edges  at (1.00, 2.00, 3.00) mm" in text

@@ -423,5 +423,7 @@ def render_table(reports: Sequence[Report], *, console: Any = None) -> None:
             at = ""
             if f.where and f.where.get("point_mm") is not None:
                 x, y, z = f.where["point_mm"]
-                at = f"  at ({x:.2f}, {y:.2f}, {z:.2f}) mm"
+                point = f"({x:.2f}, {y:.2f}, {z:.2f}) mm"
+                # most messages already name the point; do not say it twice
+                at = "" if point in f.message else f"  at {point}"
             con.print(f"  [{sev_style[f.severity]}]{f.severity:7s}[/] {f.code}: {escape(f.message)}{escape(at)}")
