@@ -280,6 +280,7 @@ def test_sliver_face_gives_finite_gradients() -> None:
         col = torch.full((1, 3), 0.3, dtype=dtype, requires_grad=True)
         image, alpha = _function().apply(proj, col, f, cfg)
         ((image - 0.8) ** 2).sum().add((alpha**2).sum()).backward()
+        assert torch.isfinite(image).all() and torch.isfinite(alpha).all(), dtype
         assert torch.isfinite(proj.grad).all() and torch.isfinite(col.grad).all(), dtype
         grads[dtype] = proj.grad.double()
     # float32 against float64 on the x, y gradients (the depth's is ~0 here)

@@ -381,6 +381,13 @@ def run_design(
                 "Run the same command again to resume."
             ) from None
         h, c = res.h, res.c
+        if res.stop_reason == "nonfinite_gradient":
+            print(
+                f"  warning: stage {spec.name} ended after {res.iterations} iterations on a NaN/inf gradient "
+                "(a renderer defect); the design continues from its last finite iterate. "
+                "Please report it with design.json.",
+                file=sys.stderr,
+            )
         vis = visible_faces(rig, h.numpy().reshape(n, n))
         seen_d = vis["direct"]
         seen_r = np.zeros_like(seen_d)
