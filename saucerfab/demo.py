@@ -7,7 +7,16 @@
    at the paper's full size (150 x 150, 512 x 512) unless ``--quick``;
 2. ``saucerfab export`` of that design for the Stratasys J55 at an 80 mm cup
    as 3MF, OBJ, PLY and VRML (the formats GrabCAD Print takes);
-3. ``saucerfab check`` of every written file.
+3. ``saucerfab check`` of every written file;
+4. ``saucerfab verify`` of the print folder: the exported OBJ ray-traced
+   with Mitsuba from the design eye and a viewer's two eyes, each view
+   scored against the inputs (pictures in ``out/demo/print/verify/``, the
+   whole story in ``out/demo/print/report.html``).
+
+The demo fails when a step fails to run (design, export, an unprintable or
+unreadable file, a print folder verify cannot read); views under verify's
+pass level are printed as such, and do not fail the demo: they are a
+finding about the design (see ``saucerfab/verify/README.md``).
 
 Each step is the CLI itself, called in-process, so the demo shows exactly
 what a user would type (printed before each step).
@@ -67,9 +76,17 @@ def run(argv: list[str] | None = None) -> int:
     )
     print("$ saucerfab check " + " ".join(files), flush=True)
     rc = cli(["check", *files, "--printer", "j55"])
+    if rc != 0:
+        return rc
+    step = ["verify", str(out / "print")]
+    print("$ saucerfab " + " ".join(step), flush=True)
+    vrc = cli(step)
+    if vrc == 2:
+        return vrc
     print(f"demo finished in {time.perf_counter() - t0:.0f} s: previews in {out / 'design' / 'previews'}, "
-          f"print files in {out / 'print'}")
-    return rc
+          f"print files in {out / 'print'}, report {out / 'print' / 'report.html'}"
+          + ("" if vrc == 0 else "; some views are under verify's pass level (printed above)"))
+    return 0
 
 
 if __name__ == "__main__":

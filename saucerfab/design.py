@@ -9,6 +9,10 @@ Layout (schema ``saucerfab.design/1``)::
       texture.png        (H, W, 3) 8-bit sRGB texture image
       face_uvs.npy       (F, 3, 2) float32, texture coordinates of each face corner
       face_view.npy      (F,) uint8, per-face texturing case (FaceView)
+      reference_<view>.png  (T, T, 3) 8-bit sRGB, each input picture as the designer
+                         meant it: alpha composited over its background and fitted
+                         into the view's square frame (what ``saucerfab verify``
+                         compares the print with; ``export`` copies them)
       previews/          PNG previews (optional, for people)
 
 Grid and face order follow :mod:`saucerfab.heightfield` (``triangulate(N)``).
@@ -67,6 +71,8 @@ class Design:
         parameters: the parameters it was made with (free-form, JSON-able).
         metrics: per-stage metrics (free-form, JSON-able).
         inputs: input names and sha256 hashes.
+        references: view name -> (T, T, 3) uint8, the input picture as meant
+            (fitted and flattened); empty for a synthetic design.
     """
 
     scene: Scene
@@ -78,6 +84,7 @@ class Design:
     parameters: dict[str, Any] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=dict)
     inputs: dict[str, Any] = field(default_factory=dict)
+    references: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -108,6 +115,11 @@ class Design:
         for ok, msg in checks:
             if not ok:
                 raise DesignError(f"inconsistent design: {msg}")
+
+
+def reference_name(view: str) -> str:
+    """File name of a view's reference picture in design and print folders."""
+    return f"reference_{view}.png"
 
 
 def sha256_file(path: str | os.PathLike[str]) -> str:
@@ -151,6 +163,7 @@ def design_json(design: Design) -> dict[str, Any]:
             "texture": "texture.png",
             "face_uvs": "face_uvs.npy",
             "face_view": "face_view.npy",
+            **{f"reference_{v}": reference_name(v) for v in sorted(design.references)},
         },
         "conventions": {
             "grid": "heights[i, j] at x = xs[j], y = ys[i]; vertex = i * N + j",
@@ -181,6 +194,8 @@ def save_design(
         "face_uvs.npy": _npy_bytes(np.asarray(design.face_uvs, np.float32)),
         "face_view.npy": _npy_bytes(np.asarray(design.face_view, np.uint8)),
     }
+    for view, img in sorted(design.references.items()):
+        files[reference_name(view)] = _png_bytes(np.ascontiguousarray(img, np.uint8))
     for name, data in (previews or {}).items():
         files[f"previews/{name}"] = data
     files.update(extra_files or {})
@@ -219,6 +234,19 @@ def _load_npy(path: Path, max_elems: int) -> np.ndarray:
         raise DesignError(f"cannot read {path}: {exc}") from None
 
 
+def _load_png(path: Path) -> np.ndarray:
+    """(H, W, 3) uint8 of a design's PNG, its pixel count bounded before decoding."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            if im.width * im.height > MAX_TEXTURE_PIXELS:
+                raise DesignError(f"{path.name} is {im.width}x{im.height}, over the limit")
+            return np.asarray(im.convert("RGB"), dtype=np.uint8)
+    except (OSError, Image.DecompressionBombError) as exc:
+        raise DesignError(f"cannot read {path}: {exc}") from None
+
+
 def load_design(folder: str | os.PathLike[str]) -> Design:
     """Read and validate a design folder.
 
@@ -248,15 +276,12 @@ def load_design(folder: str | os.PathLike[str]) -> Design:
     for name in ("heights.npy", "base_heights.npy", "face_uvs.npy", "face_view.npy", "texture.png"):
         if not (folder / name).is_file():
             raise DesignError(f"design folder {str(folder)!r} lacks {name}; re-run 'saucerfab design'")
-    from PIL import Image
-
-    try:
-        with Image.open(folder / "texture.png") as im:
-            if im.width * im.height > MAX_TEXTURE_PIXELS:
-                raise DesignError(f"texture.png is {im.width}x{im.height}, over the limit")
-            texture = np.asarray(im.convert("RGB"), dtype=np.uint8)
-    except (OSError, Image.DecompressionBombError) as exc:
-        raise DesignError(f"cannot read {folder / 'texture.png'}: {exc}") from None
+    texture = _load_png(folder / "texture.png")
+    references = {}
+    for view in ("direct", "reflected", "reflected2"):
+        ref = folder / reference_name(view)
+        if ref.is_file():
+            references[view] = _load_png(ref)
     design = Design(
         scene=scene,
         heights=_load_npy(folder / "heights.npy", limit).astype(np.float64),
@@ -267,6 +292,7 @@ def load_design(folder: str | os.PathLike[str]) -> Design:
         parameters=meta.get("parameters", {}),
         metrics=meta.get("metrics", {}),
         inputs=meta.get("inputs", {}),
+        references=references,
     )
     design.validate()
     return design

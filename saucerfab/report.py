@@ -430,12 +430,17 @@ class Section:
         images: (caption, image) pairs; image is PNG bytes (embedded as a
             data URI) or a relative path/URL string (linked as is).
         table: key -> value rows (values shown with ``str``), or None.
+        grid: (column headings, rows) of a table with columns, or None.
+        html: markup inserted as is after the images (trusted: made by
+            saucerfab, e.g. the 3D viewer), or "".
     """
 
     title: str
     text: str = ""
     images: list[tuple[str, bytes | str]] = field(default_factory=list)
     table: Mapping[str, Any] | None = None
+    grid: tuple[Sequence[str], Sequence[Sequence[Any]]] | None = None
+    html: str = ""
 
 
 _CSS = (
@@ -479,11 +484,18 @@ def html_report(sections: Sequence[Section | Mapping[str, Any]], *, title: str =
                 f'<figure><img src="{src}" alt="{esc(caption, quote=True)}">'
                 f"<figcaption>{esc(caption)}</figcaption></figure>"
             )
+        if sec.html:
+            parts.append(sec.html)
         if sec.table:
             rows = "".join(
                 f"<tr><th>{esc(str(k))}</th><td>{esc(str(v))}</td></tr>" for k, v in sec.table.items()
             )
             parts.append(f"<table>{rows}</table>")
+        if sec.grid:
+            heads, body = sec.grid
+            head = "".join(f"<th>{esc(str(h))}</th>" for h in heads)
+            rows = "".join("<tr>" + "".join(f"<td>{esc(str(c))}</td>" for c in r) + "</tr>" for r in body)
+            parts.append(f"<table><tr>{head}</tr>{rows}</table>")
         parts.append("</section>")
     parts.append("</body></html>")
     return "\n".join(parts) + "\n"

@@ -261,8 +261,8 @@ def test_local_pool_same_outputs(batch: Path, reference: tuple[Path, object], tm
     text = "".join(rec.lines)
     assert "7 jobs" in text and "broken-upload: failed" in text and "waves-j55: ok" in text
     # per-job status: workers report each stage as it starts
-    assert {s for j, s in rec.stages if j == RAW_JOB} == {"design", "export", "check"}
-    assert {s for j, s in rec.stages if j == "waves-j55"} == {"export", "check"}
+    assert {s for j, s in rec.stages if j == RAW_JOB} == {"design", "export", "check", "verify"}
+    assert {s for j, s in rec.stages if j == "waves-j55"} == {"export", "check", "verify"}
     assert_no_temporaries(out)
 
 

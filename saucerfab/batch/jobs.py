@@ -395,7 +395,6 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
     )
     times["export"] = time.perf_counter() - t
     export_dir = out / "export"
-    files.update(_collect(export_dir, "export"))
 
     stage[0] = "check"
     _emit(payload, "check")
@@ -420,6 +419,16 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
             if report.exit_code != 0:
                 reasons.append(f"{rel}: {report.reason()}")
     times["check"] = time.perf_counter() - t
+
+    stage[0] = "verify"
+    _emit(payload, "verify")
+    t = time.perf_counter()
+    from saucerfab.finish import finish_print
+
+    # the quick ray-traced verify and the print's report.html, without times (byte-identical reruns)
+    finish_print(result, payload.printer, check=False, verify=True, record_times=False)
+    times["verify"] = time.perf_counter() - t
+    files.update(_collect(export_dir, "export"))
     verdict = max((c["verdict"] for c in checks.values()), key=lambda v: VERDICT_RANK.get(v, 3))
     return JobResult(
         job_id=payload.job_id,

@@ -169,8 +169,12 @@ def report_html(data: dict[str, Any]) -> str:
         files = "".join(
             f'<a href="{e(j["output"] + "/" + f)}">{e(f)}</a><br>'
             for f in j.get("files", [])
-            if j.get("output") and f.startswith("export/") and not f.endswith((".png", ".mtl", ".json"))
+            if j.get("output") and f.startswith("export/") and "/" not in f[len("export/"):]
+            and not f.endswith((".png", ".mtl", ".json", ".html"))
         )
+        for page, label in (("export/report.html", "print report"), ("design/report.html", "design report")):
+            if j.get("output") and page in j.get("files", []):
+                files += f'<a href="{e(j["output"] + "/" + page)}">{label}</a><br>'
         preview = "design/previews/composite.png"
         if j.get("output") and preview in j.get("files", []):
             src = e(j["output"] + "/" + preview)

@@ -80,6 +80,10 @@ class Limits:
             independent second opinion on manifoldness; about 0.1 s per
             100,000 triangles, so off by default - the tests hold the
             checker's own topology to manifold3d's verdict instead).
+        keep_texture_pixels: keep each decoded texture's pixels on its
+            :class:`~saucerfab.check.meshdata.TextureInfo` (``pixels``), for
+            callers that render the file (``saucerfab verify``); the checks
+            themselves only need the sizes, so it is off by default.
     """
 
     max_file_bytes: int = 1 * GIB
@@ -105,6 +109,7 @@ class Limits:
     plausible_size_mm: tuple[float, float] = (5.0, 5000.0)
     uv_tolerance: float = 1e-4
     manifold3d_crosscheck: bool = False
+    keep_texture_pixels: bool = False
 
     def with_(self, **changes: Any) -> Limits:
         """A copy with some limits changed (unknown names raise ``TypeError``)."""

@@ -38,6 +38,8 @@ class TextureInfo:
         width, height: pixels (from the header, also when too large), or None.
         image_format: Pillow's format name (``PNG``, ``JPEG``...), or None.
         message: why, when status is not ``ok``.
+        pixels: (height, width, 3) uint8 sRGB, row 0 at the top, when the
+            limits ask to keep them (``Limits.keep_texture_pixels``); else None.
     """
 
     name: str
@@ -46,6 +48,7 @@ class TextureInfo:
     height: int | None = None
     image_format: str | None = None
     message: str = ""
+    pixels: np.ndarray | None = field(default=None, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "status": self.status, "width": self.width, "height": self.height,
@@ -63,7 +66,8 @@ class MeshData:
         unit_mm: millimetres per file unit.
         units: the unit's name (``millimeter``, ``inch``...).
         units_stated: whether the file states its unit (3MF, glTF by spec) or it was assumed.
-        corner_uv: (m, 3, 2) texture coordinates per face corner, NaN where a face has none; or None.
+        corner_uv: (m, 3, 2) texture coordinates per face corner as the file stores them (glTF: v
+            down from the image's top; the other formats: v up), NaN where a face has none; or None.
         face_texture: (m,) index into ``textures`` per face, -1 for none; or None.
         face_colour: (m,) bool, faces coloured by vertex/face/material colours; or None.
         colour_kinds: which colour carriers the file uses: ``texture``, ``vertex``, ``face``, ``material``.

@@ -25,6 +25,7 @@ from saucerfab.errors import SaucerfabError
 SUBCOMMANDS: dict[str, str] = {
     "design": "design",
     "export": "export",
+    "verify": "verify",
     "check": "check",
     "batch": "batch",
     "printers": "printers",

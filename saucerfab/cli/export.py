@@ -14,8 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
-from typing import Any
 
 HELP = "turn a design into print-ready files (3MF, OBJ, GLB, PLY, VRML) with scene.json"
 
@@ -61,32 +59,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     c.add_argument("--zip-obj", action="store_true", help="write OBJ + MTL + PNG as one zip (what bureaus ask for)")
     c.add_argument("--name", default="saucer", help="file stem of the written files (default saucer)")
     p.add_argument("--no-check", action="store_true", help="skip the validity check of the written files")
+    p.add_argument("--no-verify", action="store_true",
+                   help="skip the quick ray-traced verify of the print (see 'saucerfab verify' for a full one)")
     p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
-
-
-def check_file(path: Path, profile: Any) -> Any | None:
-    """``saucerfab.check.check_mesh(path, printer=profile)``, or None where the checker is absent.
-
-    A zipped OBJ (``--zip-obj``) is checked as what the bureau unpacks: the
-    archive (written by us a moment ago, so its names are safe) goes to a
-    temporary folder and its ``.obj`` is checked with the MTL and PNG beside it.
-    """
-    try:
-        from saucerfab.check import check_mesh
-    except ImportError:
-        return None
-    if path.suffix != ".zip":
-        return check_mesh(path, printer=profile)
-    import tempfile
-    import zipfile
-
-    with tempfile.TemporaryDirectory(prefix="saucerfab-check-") as tmp, zipfile.ZipFile(path) as zf:
-        zf.extractall(tmp)
-        objs = sorted(Path(tmp).glob("*.obj"))
-        if not objs:
-            return check_mesh(path, printer=profile)
-        return check_mesh(objs[0], printer=profile)
 
 
 def _size(n: int) -> str:
@@ -100,7 +76,6 @@ def run(args: argparse.Namespace) -> int:
     from saucerfab.fabricate.options import FabOptions
     from saucerfab.fabricate.pipeline import export_design
     from saucerfab.fabricate.profiles import load_profile
-    from saucerfab.fabricate.registry import WRITERS
 
     options = FabOptions(
         base_thickness_mm=args.base_mm,
@@ -132,15 +107,15 @@ def run(args: argparse.Namespace) -> int:
         progress=progress,
     )
 
-    checks: list[tuple[Path, Any]] = []
-    if not args.no_check:
-        for fmt, paths in result.files.items():
-            suffix = WRITERS[fmt].mesh_suffix
-            mesh_files = [p for p in paths if p.suffix == suffix] or [p for p in paths if p.suffix == ".zip"]
-            for path in mesh_files:
-                checks.append((path, check_file(path, profile)))
-    exit_code = max([int(r.exit_code) for _, r in checks if r is not None], default=0)
+    from saucerfab.finish import finish_print
 
+    def verify_progress(msg: str, fraction: float) -> None:
+        if not args.quiet:
+            print(f"[verify {fraction * 100:5.1f}%] {msg}", file=sys.stderr, flush=True)
+
+    done = finish_print(result, profile, check=not args.no_check, verify=not args.no_verify, progress=verify_progress)
+    checks = done.checks
+    exit_code = done.check_exit_code
     if args.json:
         d = result.to_dict()
         d["checks"] = [
@@ -154,6 +129,8 @@ def run(args: argparse.Namespace) -> int:
             }
             for p, r in checks
         ]
+        d["verify"] = done.verify.to_dict() if done.verify is not None else None
+        d["notes"] = list(done.notes)
         d["exit_code"] = exit_code
         print(json.dumps(d, indent=2))
         return exit_code
@@ -185,4 +162,19 @@ def run(args: argparse.Namespace) -> int:
             for f in findings:
                 if getattr(f, "severity", "") in ("error", "warning"):
                     print(f"      {f.severity}: {getattr(f, 'message', f)}")
+    if done.verify is not None:
+        from saucerfab.verify import stand_sentence
+
+        v = done.verify
+        print(f"  verify   {v.files[0].path.name} ray-traced at {v.res} px ({v.seconds:.0f} s; "
+              f"'saucerfab verify {result.out}' for a full one)")
+        for s in v.files[0].views:
+            psnr = "  -- " if s.psnr_db != s.psnr_db else f"{s.psnr_db:4.1f}"
+            shift = "" if s.eye == "design" else " (after the best whole-picture shift)"
+            print(f"    {s.view:10s} from the {s.eye:6s} eye  {psnr} dB, {s.coverage * 100:3.0f}% of the frame"
+                  f"{'' if s.passed else '  LOW'}{shift}")
+        print(f"  stand    {stand_sentence(v.where_to_stand)}")
+    for note in done.notes:
+        print(f"  note: {note}")
+    print(f"  report   {result.out / 'report.html'}")
     return exit_code

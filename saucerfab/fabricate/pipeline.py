@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from saucerfab import __version__
-from saucerfab.design import Design, load_design
+from saucerfab.design import Design, load_design, reference_name
 from saucerfab.errors import ConfigError, DesignError, ExportError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.profiles import PrinterProfile, load_profile
@@ -255,7 +255,10 @@ def export_design(
                     )
 
     scene_bytes = scene_json_bytes(scene, solid)
-    all_files = registry.merge_files(per_format, {"scene.json": scene_bytes})
+    extra = {"scene.json": scene_bytes}
+    # the pictures as the design meant them travel with the print, so 'saucerfab verify' needs only this folder
+    extra.update({reference_name(v): png_bytes(img) for v, img in sorted(dsg.references.items())})
+    all_files = registry.merge_files(per_format, extra)
     summary = {
         "schema": "saucerfab.export/1",
         "saucerfab_version": __version__,

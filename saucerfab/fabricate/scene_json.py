@@ -49,9 +49,14 @@ def _pt(m: np.ndarray, p: tuple[float, ...]) -> list[float]:
     return [_r(c) for c in q[:3]]
 
 
-def scene_dict(scene: Scene, solid: Solid) -> dict[str, Any]:
-    """The ``scene.json`` content for ``scene`` as written with ``solid``'s transform."""
-    m = solid.model_to_file
+def viewing_dict(scene: Scene, model_to_file: np.ndarray) -> dict[str, Any]:
+    """The viewing part of ``scene.json`` (schema, units, camera, views, cup, transform).
+
+    ``model_to_file``: (4, 4) uniform scale (mm per model unit) and translation.
+    This is what a renderer needs to show the saucer with its cup; the
+    design report uses it for a design that has no solid yet.
+    """
+    m = np.asarray(model_to_file, np.float64)
     s = float(m[0, 0])
     cup = scene.cup
     centre = _pt(m, (0.0, 0.0, 0.0))
@@ -80,8 +85,6 @@ def scene_dict(scene: Scene, solid: Solid) -> dict[str, Any]:
             "height": int(v.image_size),
         }
 
-    (x0, x1), (y0, y1) = solid.footprint
-    seat = solid.seat
     return {
         "schema": SCHEMA,
         "units": "mm",
@@ -95,6 +98,15 @@ def scene_dict(scene: Scene, solid: Solid) -> dict[str, Any]:
         "cup": cup_d,
         "model_to_file": [[_r(c) for c in row] for row in m.tolist()],
         "mm_per_unit": _r(s),
+    }
+
+
+def scene_dict(scene: Scene, solid: Solid) -> dict[str, Any]:
+    """The ``scene.json`` content for ``scene`` as written with ``solid``'s transform."""
+    (x0, x1), (y0, y1) = solid.footprint
+    seat = solid.seat
+    return {
+        **viewing_dict(scene, solid.model_to_file),
         "saucer": {"x_range": [_r(x0), _r(x1)], "y_range": [_r(y0), _r(y1)]},
         "seat": {
             "kind": seat.kind,

@@ -440,6 +440,8 @@ def run_design(
         parameters=_parameters(request, weights, rho),
         metrics=metrics,
         inputs=prep.inputs,
+        # the inputs as meant, at the texture's detail: what verify compares prints with
+        references={k: np.round(np.clip(v, 0.0, 1.0) * 255.0).astype(np.uint8) for k, v in prep.texture.items()},
     )
     from saucerfab.optimize.previews import make_previews
 
@@ -451,7 +453,10 @@ def run_design(
     if not request.record_times:
         _drop_times(metrics)
     energy_log = "\n".join(json.dumps(e) for e in log).encode() + b"\n"
-    save_design(design, out, previews=previews, extra_files={"energy_log.jsonl": energy_log})
+    from saucerfab.report_page import REPORT_NAME, design_report
+
+    report = design_report(design, previews).encode("utf-8")
+    save_design(design, out, previews=previews, extra_files={"energy_log.jsonl": energy_log, REPORT_NAME: report})
     ckpt.clear()
     return out
 

@@ -6,6 +6,8 @@
   mirror cup showing its reflection, in one wider frame;
 * ``height_change.png``: |h - z| colour-coded;
 * ``side_by_side.png``: inputs against results;
+* ``inputs_targets.png``: each input as meant, its foreground mask and its
+  enhanced target (what the first stages aim at);
 * ``optimized_colors.png``: the per-face-coloured result against the
   enhanced targets (what the stages optimised, before texturing);
 * ``energies.png``: the energies over time per stage (as the paper's Figure 10).
@@ -163,6 +165,13 @@ def make_previews(
         panels.append((f"input: {name}", prep.render[name]))
         panels.append((f"result: {name}", views[name]))
     pngs["side_by_side.png"] = report.to_png_bytes(report.side_by_side(panels))
+    # what the optimizer was given: each input as meant, its foreground mask, its enhanced target
+    given = []
+    for name in views:
+        given.append((f"input: {name}", prep.render[name]))
+        given.append((f"mask: {name}", report.mask_overlay(prep.render[name], prep.masks[name])))
+        given.append((f"target: {name}", prep.enhanced[name]))
+    pngs["inputs_targets.png"] = report.to_png_bytes(report.side_by_side(given))
     with torch.no_grad():
         h = torch.as_tensor(design.heights.reshape(-1), dtype=torch.float32)
         soft = rig.render(h, torch.as_tensor(colors, dtype=torch.float32), SIGMA_SMALL)

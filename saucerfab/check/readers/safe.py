@@ -25,6 +25,8 @@ import zlib
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import ReadError, TextureInfo
 
@@ -287,6 +289,8 @@ def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool
                 return info
             if decode:
                 img.load()
+                if limits.keep_texture_pixels:
+                    info.pixels = np.asarray(img.convert("RGB"), dtype=np.uint8)
     except Image.DecompressionBombError as exc:
         info.status, info.message = "too_large", f"texture {name!r}: {exc}"
     except UnidentifiedImageError:

@@ -1,0 +1,127 @@
+"""Verified print quality of designs on the bundled pairs, and the speed of ``saucerfab verify``.
+
+    .venv/bin/python benchmarks/bench_verify.py                      # the default design, every bundled pair
+    .venv/bin/python benchmarks/bench_verify.py --design-args "--frames contain" --label contain
+    .venv/bin/python benchmarks/bench_verify.py --pairs heart-star --resolution 60 --image-size 192   # quick
+
+For each pair: ``saucerfab design`` exactly as a user types it (defaults,
+plus ``--design-args``), ``saucerfab export --printer j55
+--cup-diameter-mm 80 --formats obj``, then ``saucerfab verify``'s library
+call at 256 px, 16 samples per pixel, from the design eye and a viewer's
+two eyes (32 mm left and right), and prints one markdown table row per
+pair and view: PSNR / SSIM / coverage per eye, with the design and verify
+wall times. The verify time is the issue's speed target (both views from
+three eyes at 256 px within 60 s on 2 cores); the export's wall time of the
+same design, in the same run, is printed beside it as the reference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_design import PAIRS, SAMPLES, machine
+
+from saucerfab.cli import main as cli
+from saucerfab.verify import EyeSpec, verify_print
+
+
+def run_pair(pair: str, args: argparse.Namespace, tmp: Path) -> dict:
+    direct, reflected = PAIRS[pair]
+    design, print_dir = tmp / pair / "design", tmp / pair / "print"
+    size = []
+    if args.resolution:
+        size += ["--resolution", str(args.resolution)]
+    if args.image_size:
+        size += ["--image-size", str(args.image_size)]
+    cmd = ["design", "--direct", str(SAMPLES / direct), "--reflected", str(SAMPLES / reflected),
+           "--out", str(design), "--quiet", *size, *shlex.split(args.design_args)]
+    t0 = time.perf_counter()
+    if cli(cmd) != 0:
+        raise SystemExit(f"design failed for {pair}")
+    t_design = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rc = cli(["export", str(design), "--printer", "j55", "--cup-diameter-mm", "80", "--formats", "obj",
+              "--out", str(print_dir), "--quiet", "--no-verify", "--no-check"])
+    t_export = time.perf_counter() - t0
+    if rc != 0:
+        raise SystemExit(f"export failed for {pair} (exit {rc})")
+    res = verify_print(print_dir, eyes=EyeSpec("both"), res=args.res, spp=args.spp, all_formats=False,
+                       pictures_dir=(Path(args.keep) / args.label / pair / "verify") if args.keep else None)
+    return {
+        "pair": pair,
+        "command": " && ".join([
+            f"saucerfab design --direct samples/{direct} --reflected samples/{reflected} --out D "
+            + " ".join([*size, *shlex.split(args.design_args)]),
+            "saucerfab export D --printer j55 --cup-diameter-mm 80 --formats obj --out P",
+            f"saucerfab verify P --eyes both --res {args.res} --spp {args.spp} --primary-only",
+        ]),
+        "design_s": t_design,
+        "export_s": t_export,
+        "verify_s": res.seconds,
+        "scores": {f"{v.view}/{v.eye}": v.to_dict() for v in res.files[0].views},
+    }
+
+
+def table(rows: list[dict], label: str) -> str:
+    out = [
+        (f"| pair ({label}) | view | design eye dB / SSIM / coverage | left eye dB (shift) | right eye dB (shift) "
+        "| design s | verify s |"),
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        for view in ("direct", "reflected"):
+            d, le, ri = (r["scores"][f"{view}/{e}"] for e in ("design", "left", "right"))
+
+            def db(v: dict) -> str:
+                return "-" if v["psnr_db"] is None else f"{v['psnr_db']:.1f}"
+
+            out.append(
+                f"| {r['pair']} | {view} | {db(d)} / {d['ssim']:.2f} / {100 * d['coverage']:.0f}% "
+                f"| {db(le)} ({le['shift_px'][0]:+d},{le['shift_px'][1]:+d}) "
+                f"| {db(ri)} ({ri['shift_px'][0]:+d},{ri['shift_px'][1]:+d}) "
+                f"| {r['design_s']:.0f} | {r['verify_s']:.1f} |"
+            )
+    return "\n".join(out)
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--pairs", default="all", help=f"comma-separated or 'all': {', '.join(PAIRS)}")
+    p.add_argument("--design-args", default="", help="extra 'saucerfab design' options, e.g. '--frames contain'")
+    p.add_argument("--label", default="default", help="name of this configuration in the table")
+    p.add_argument("--resolution", type=int, default=None, help="design --resolution (default: the design default)")
+    p.add_argument("--image-size", type=int, default=None, help="design --image-size (default: the design default)")
+    p.add_argument("--res", type=int, default=256)
+    p.add_argument("--spp", type=int, default=16)
+    p.add_argument("--keep", help="keep the verify pictures here (LABEL/PAIR/verify)")
+    p.add_argument("--json", help="also write the rows as JSON to this file")
+    args = p.parse_args()
+    pairs = list(PAIRS) if args.pairs == "all" else args.pairs.split(",")
+    print(f"machine: {machine()}", flush=True)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for pair in pairs:
+            rows.append(run_pair(pair, args, Path(tmp)))
+            print(f"{pair}: design {rows[-1]['design_s']:.0f} s, export {rows[-1]['export_s']:.1f} s, "
+                  f"verify {rows[-1]['verify_s']:.1f} s", flush=True)
+    print()
+    for r in rows:
+        print(f"{r['pair']}: {r['command']}")
+    print(table(rows, args.label))
+    if args.json:
+        Path(args.json).write_text(json.dumps({"label": args.label, "machine": machine(), "rows": rows}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,113 @@
+"""``saucerfab verify PRINT_DIR``: ray-trace the exported files and score them against the inputs.
+
+    saucerfab verify PRINT_DIR [--eyes design|both|box:W,H[,N]] [--res N] [--min-psnr DB] [--json]
+
+Writes the pictures (ray-traced view, reference, difference heat map) and
+``verify.json`` into ``PRINT_DIR/verify/`` (or ``--out DIR``), replacing an
+earlier verify there as a whole. Exit code: 0 every view passed, 1 some view
+is under ``--min-psnr`` or ``--min-coverage``, 2 the folder or its files
+cannot be read (nothing is written then).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+HELP = "ray-trace an export folder's files and score what the viewer sees against the inputs; exit 0/1/2"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from saucerfab.verify.core import (
+        DEFAULT_MIN_COVERAGE,
+        DEFAULT_MIN_PSNR_DB,
+        DEFAULT_RES,
+        DEFAULT_SPP,
+    )
+    from saucerfab.verify.eyes import DEFAULT_IPD_MM
+
+    p.add_argument("folder", nargs="?", metavar="PRINT_DIR", help="a folder written by 'saucerfab export'")
+    p.add_argument("--eyes", default="both", metavar="MODE",
+                   help="design (the design point), both (it and a viewer's two eyes, the default) or "
+                        "box:W,H[,N] (it and an N x N grid over W x H mm facing the saucer)")
+    p.add_argument("--ipd-mm", type=float, default=DEFAULT_IPD_MM,
+                   help=f"distance between the viewer's eyes for --eyes both (default {DEFAULT_IPD_MM:g} mm)")
+    p.add_argument("--res", type=int, default=DEFAULT_RES, help=f"render size in pixels per side (default {DEFAULT_RES})")
+    p.add_argument("--spp", type=int, default=DEFAULT_SPP, help=f"samples per pixel (default {DEFAULT_SPP})")
+    p.add_argument("--min-psnr", type=float, default=DEFAULT_MIN_PSNR_DB,
+                   help=f"pass level of every view from every eye, dB (default {DEFAULT_MIN_PSNR_DB:g})")
+    p.add_argument("--min-coverage", type=float, default=DEFAULT_MIN_COVERAGE,
+                   help=f"least share of each view's frame the saucer must fill (default {DEFAULT_MIN_COVERAGE:g})")
+    p.add_argument("--primary-only", action="store_true",
+                   help="render only the first of OBJ, 3MF, GLB (the others are rendered from the design eye by default)")
+    p.add_argument("-o", "--out", metavar="DIR", help="where to write the pictures and verify.json (default PRINT_DIR/verify)")
+    p.add_argument("--json", action="store_true", help="print the saucerfab.verify/1 JSON document on stdout")
+    p.add_argument("--schema", action="store_true", help="print the JSON Schema of --json output and exit")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+
+
+def print_scores(result, out=None) -> None:  # type: ignore[no-untyped-def]
+    """The per-view table of a :class:`~saucerfab.verify.VerifyResult` for people."""
+    from saucerfab.verify import stand_sentence
+
+    out = out if out is not None else sys.stdout
+    print(f"verified {result.folder} (Mitsuba {result.renderer['version']}, {result.res} px, {result.spp} spp, "
+          f"{result.seconds:.0f} s)", file=out)
+    print(f"  where to stand: {stand_sentence(result.where_to_stand)}", file=out)
+    for f in result.files:
+        print(f"  {f.path.name}", file=out)
+        for v in f.views:
+            shift = "" if v.shift_px == (0, 0) else f"  after a whole-picture shift of {v.shift_px[0]:+d},{v.shift_px[1]:+d} px"
+            psnr = "   -- " if v.psnr_db != v.psnr_db else f"{v.psnr_db:5.1f}"
+            print(f"    {v.view:10s} {v.eye:8s} {psnr} dB  SSIM {v.ssim:4.2f}  coverage {v.coverage * 100:5.1f}%  "
+                  f"{'ok' if v.passed else 'LOW'}{shift}", file=out)
+    verdict = "every view passes" if result.passed else "some views are under the levels"
+    print(f"  {verdict} (min {result.min_psnr_db:g} dB, coverage {result.min_coverage * 100:g}%; exit {result.exit_code})",
+          file=out)
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    from saucerfab.errors import ConfigError
+    from saucerfab.fileio import atomic_dir
+    from saucerfab.verify import parse_eyes, verify_print
+    from saucerfab.verify.schema import JSON_SCHEMA
+
+    if args.schema:
+        print(json.dumps(JSON_SCHEMA, indent=2))
+        return 0
+    if not args.folder:
+        raise ConfigError("give the print folder to verify: saucerfab verify PRINT_DIR")
+    eyes = parse_eyes(args.eyes, args.ipd_mm)
+    folder = Path(args.folder)
+    out = Path(args.out) if args.out else folder / "verify"
+
+    def progress(msg: str, fraction: float) -> None:
+        if not args.quiet:
+            print(f"[{fraction * 100:5.1f}%] {msg}", file=sys.stderr, flush=True)
+
+    from saucerfab.verify.printfolder import VerifyInputError
+
+    if not folder.is_dir():
+        raise VerifyInputError(f"{folder} is not a folder; give the folder 'saucerfab export --out' wrote")
+    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / "verify.json").is_file())):
+        raise ConfigError(f"--out {str(out)!r} exists and is not an earlier verify folder; give a new or empty folder")
+    with atomic_dir(out) as tmp:
+        result = verify_print(
+            folder, eyes=eyes, res=args.res, spp=args.spp, min_psnr_db=args.min_psnr,
+            min_coverage=args.min_coverage, pictures_dir=tmp, all_formats=not args.primary_only, progress=progress,
+        )
+        doc = result.to_dict()
+        (tmp / "verify.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    if out.resolve().parent == folder.resolve():
+        from saucerfab.report_page import refresh_export_report
+
+        refresh_export_report(folder)
+    if args.json:
+        print(json.dumps(doc, indent=2))
+    else:
+        print_scores(result)
+        print(f"  pictures and verify.json in {out}")
+    return result.exit_code

@@ -1,0 +1,315 @@
+"""``report.html``: one self-contained page per design folder and per print folder.
+
+Each page is a pure function of its folder's files, so any command that
+changes a folder rewrites the page (``design`` writes the design's,
+``export`` and ``verify`` the print's). Pictures are inlined as data URIs
+and the 3D view (:func:`saucerfab.viewer.viewer_html`) carries three.js and
+the model inline, so the page opens from disk with no network access.
+
+* design report: the inputs as meant, masks and enhanced targets, the
+  optimizer's views and composite, the height change, the energies and the
+  stage table, the physical size, where to stand, and the saucer in 3D
+  (its top surface, as designed);
+* print report: the printer, files and sizes, where to stand, the verified
+  views from every eye (ray-traced from the files, with their references
+  and difference maps), the printability findings, and the printed part in
+  3D read back from its file, with the mirror cup.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from saucerfab.report import Section, html_report
+
+if TYPE_CHECKING:
+    from saucerfab.design import Design
+
+REPORT_NAME = "report.html"
+#: texture edge of the 3D view's model (the page stays a few MB)
+VIEWER_TEXTURE_PX = 1024
+#: largest JSON file a report reads (verify.json, check.json)
+_MAX_JSON_BYTES = 8 << 20
+#: largest picture a report inlines
+_MAX_PICTURE_BYTES = 16 << 20
+
+
+def _png(rgb: np.ndarray, max_px: int | None = None) -> bytes:
+    from PIL import Image
+
+    im = Image.fromarray(np.ascontiguousarray(rgb, np.uint8))
+    if max_px is not None and max(im.size) > max_px:
+        im = im.resize((max_px, max_px), Image.Resampling.LANCZOS)
+    buf = io.BytesIO()
+    im.save(buf, format="PNG", compress_level=6)
+    return buf.getvalue()
+
+
+def _read(path: Path, cap: int) -> bytes | None:
+    """A file's bytes if it exists and is at most ``cap`` bytes, else None."""
+    try:
+        if not path.is_file() or path.stat().st_size > cap:
+            return None
+        return path.read_bytes()
+    except OSError:
+        return None
+
+
+def _json(path: Path) -> dict[str, Any] | None:
+    data = _read(path, _MAX_JSON_BYTES)
+    if data is None:
+        return None
+    try:
+        d = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+        return None
+    return d if isinstance(d, dict) else None
+
+
+def _glb(vertices_mm: np.ndarray, faces: np.ndarray, corner_uv: np.ndarray, texture: np.ndarray) -> bytes:
+    """A GLB (metres, y up, as exported) of a textured mesh for the 3D view."""
+    from saucerfab.fabricate.export_glb import glb_bytes
+    from saucerfab.fabricate.textured import TexturedMesh
+
+    f = faces.shape[0]
+    mesh = TexturedMesh(
+        name="saucer",
+        vertices=np.asarray(vertices_mm, np.float64),
+        faces=np.asarray(faces, np.int64),
+        uvs=np.asarray(corner_uv, np.float64).reshape(-1, 2),
+        face_uvs=np.arange(3 * f, dtype=np.int64).reshape(f, 3),
+        texture_png=_png(texture, VIEWER_TEXTURE_PX),
+        texture_px=VIEWER_TEXTURE_PX,
+        vertex_rgb=np.zeros((vertices_mm.shape[0], 3), np.uint8),
+    )
+    return glb_bytes(mesh)
+
+
+def _viewer_section(glb: bytes, scene: dict[str, Any], what: str) -> Section:
+    from saucerfab.viewer import viewer_html
+
+    return Section(
+        f"In 3D: {what}",
+        "Drag to orbit, scroll to zoom. The view opens at the design eye; the cup is drawn as a mirror.",
+        html=viewer_html(glb, scene),
+    )
+
+
+def _stand(where: dict[str, Any]) -> str:
+    from saucerfab.verify.core import stand_sentence
+
+    return stand_sentence(where)
+
+
+# --------------------------------------------------------------------------- design folder
+
+
+def design_report(design: Design, previews: Mapping[str, bytes]) -> str:
+    """The HTML page of a design folder (titled by its input pictures, so it does not depend on the folder's name).
+
+    Args:
+        design: the design (as written or loaded).
+        previews: PNG bytes by preview file name (``composite.png``...).
+    """
+    from saucerfab import __version__
+    from saucerfab.fabricate.scene_json import viewing_dict
+
+    scene = design.scene
+    metrics = design.metrics
+    params = design.parameters
+    s = scene.mm_per_unit
+    m = np.diag([s, s, s, 1.0])
+    view_d = viewing_dict(scene, m)
+    where = _where_from_viewing(view_d)
+
+    def pic(name: str) -> bytes | None:
+        return previews.get(name)
+
+    inputs = design.inputs
+    summary = {
+        "direct picture": inputs.get("direct", {}).get("file", "-"),
+        "reflected picture": inputs.get("reflected", {}).get("file", "-"),
+        **({"second reflected picture": inputs["reflected2"].get("file", "-")} if "reflected2" in inputs else {}),
+        "base shape": inputs.get("shape", {}).get("builtin") or inputs.get("shape", {}).get("file", "-"),
+        "cup": f"{scene.cup.kind}, {scene.cup_diameter_mm:g} mm wide",
+        "saucer": f"{scene.saucer.size[0] * s:.0f} x {scene.saucer.size[1] * s:.0f} mm, relief bound "
+                  f"{scene.saucer.delta * s:.2f} mm, {scene.saucer.resolution} x {scene.saucer.resolution} grid",
+        "frames": str(params.get("frames", "-")),
+        "method": str(params.get("ablation", "-")),
+        "where to stand": _stand(where),
+        "max |h - z|": f"{metrics.get('max_abs_height_change', float('nan')) * s:.3f} mm",
+        "saucerfab": __version__,
+    }
+    sections = [Section("Design", table=summary)]
+    sections.append(_viewer_section(
+        _glb(design.vertices() * s, design.faces(), design.face_uvs.astype(np.float64), design.texture), view_d,
+        "the designed saucer top (before it is made a solid) and the cup",
+    ))
+    refs = [(f"{v} picture as meant", _png(img, 512)) for v, img in design.references.items()]
+    targets = pic("inputs_targets.png")
+    sections.append(Section(
+        "Inputs, masks and enhanced targets",
+        "Each picture as the design meant it (fitted into its frame, transparency over the background), "
+        "its foreground mask, and the black-white target the first stages optimise towards.",
+        images=refs + ([("inputs, masks and targets", targets)] if targets else []),
+    ))
+    views = [(cap, pic(name)) for cap, name in (
+        ("what the viewer sees (optimizer's renderer)", "composite.png"),
+        ("direct view", "direct_view.png"),
+        ("reflected view", "reflected_view.png"),
+        ("second reflected view", "reflected2_view.png"),
+        ("inputs against results", "side_by_side.png"),
+        ("optimised colours against targets", "optimized_colors.png"),
+    )]
+    sections.append(Section(
+        "Views (the optimizer's own renders)",
+        "These come from the optimizer's rasterizer. The print's own pictures, ray-traced from the exported "
+        "files, are in the report 'saucerfab export' writes beside the print files.",
+        images=[(c, b) for c, b in views if b],
+    ))
+    hc = pic("height_change.png")
+    if hc:
+        sections.append(Section("Height change", images=[("|h - z| over the saucer", hc)]))
+    en = pic("energies.png")
+    rows = [
+        [st.get("name"), st.get("targets"), f"{st.get('sigma', 0):g}", st.get("iterations"), st.get("stop_reason"),
+         f"{st.get('E_visual', float('nan')):.1f}", f"{st.get('E_deform', float('nan')):.4f}",
+         f"{st['seconds']:.1f}" if "seconds" in st else "-"]
+        for st in metrics.get("stages", [])
+    ]
+    sections.append(Section(
+        "Energies and stages",
+        images=[("energies over time", en)] if en else [],
+        grid=(["stage", "targets", "sigma", "iterations", "stopped", "E_visual", "E_deform", "seconds"], rows),
+    ))
+    names = " / ".join(str(design.inputs[k].get("file")) for k in ("direct", "reflected", "reflected2")
+                       if isinstance(design.inputs.get(k), dict))
+    return html_report(sections, title=f"saucerfab design: {names or 'synthetic'}")
+
+
+def _where_from_viewing(view_d: dict[str, Any]) -> dict[str, Any]:
+    """``where_to_stand`` from a viewing dict (camera and cup in mm)."""
+    cam = view_d["camera"]["position"]
+    cup = view_d["cup"]
+    dx, dy, dz = cam[0] - cup["center"][0], cam[1] - cup["center"][1], cam[2] - cup["bottom_z"]
+    horiz = math.hypot(dx, dy)
+    return {"distance_mm": horiz, "height_mm": dz, "straight_line_mm": math.hypot(horiz, dz)}
+
+
+def write_design_report(folder: str | Path) -> Path:
+    """Write ``folder/report.html`` for an existing design folder (atomically); returns its path."""
+    from saucerfab.design import load_design
+    from saucerfab.fileio import write_text_atomic
+
+    folder = Path(folder)
+    previews = {p.name: p.read_bytes() for p in sorted((folder / "previews").glob("*.png"))
+                if p.stat().st_size <= _MAX_PICTURE_BYTES}
+    return write_text_atomic(folder / REPORT_NAME, design_report(load_design(folder), previews))
+
+
+# --------------------------------------------------------------------------- print folder
+
+
+def export_report(folder: str | Path) -> str:
+    """The HTML page of a print folder (export.json, scene.json, verify/, check.json)."""
+    from saucerfab.verify.core import where_to_stand
+    from saucerfab.verify.printfolder import (
+        find_mesh_files,
+        load_print_scene,
+        read_surface,
+    )
+
+    folder = Path(folder)
+    summary = _json(folder / "export.json") or {}
+    scene = load_print_scene(folder)
+    scene_raw = _json(folder / "scene.json") or {}
+    where = where_to_stand(scene)
+    bbox = summary.get("bbox_mm") or [float("nan")] * 3
+    printer = summary.get("printer", {})
+    table = {
+        "printer": f"{printer.get('name', '-')} ({printer.get('key', '-')})",
+        "part": f"{bbox[0]:.1f} x {bbox[1]:.1f} x {bbox[2]:.1f} mm",
+        "cup": f"{scene.cup.shape}, {scene.cup.width_mm:g} mm wide, {scene.cup.height:g} mm mirror height",
+        "where to stand": _stand(where),
+        "triangles": f"{summary.get('triangles', 0):,}",
+        "volume": f"{summary.get('volume_mm3', 0) / 1000:.2f} cm3",
+        "texture": f"{summary.get('texture_px', '-')} px",
+        "saucerfab": str(summary.get("saucerfab_version", "-")),
+    }
+    sections = [Section("Print", table=table)]
+    files = summary.get("files", {})
+    sections.append(Section(
+        "Files",
+        grid=(["file", "bytes", "sha256"], [[n, f"{d.get('bytes', 0):,}", str(d.get("sha256", ""))[:16]]
+                                            for n, d in sorted(files.items())]),
+    ))
+    ver = _json(folder / "verify" / "verify.json")
+    if ver and ver.get("schema") == "saucerfab.verify/1":
+        rows, images = [], []
+        for f in ver.get("files", []):
+            for v in f.get("views", []):
+                shift = v.get("shift_px") or [0, 0]
+                rows.append([
+                    Path(str(f.get("path", ""))).name, v.get("view"), v.get("eye"),
+                    "-" if v.get("psnr_db") is None else f"{v['psnr_db']:.1f}",
+                    "-" if v.get("ssim") is None else f"{v['ssim']:.3f}",
+                    f"{100 * v.get('coverage', 0):.1f} %", f"{shift[0]:+d}, {shift[1]:+d}",
+                    "pass" if v.get("passed") else "LOW",
+                ])
+                name = v.get("picture")
+                if isinstance(name, str) and "/" not in name and "\\" not in name:
+                    data = _read(folder / "verify" / name, _MAX_PICTURE_BYTES)
+                    if data:
+                        images.append((f"{Path(str(f.get('path', ''))).name}: {v.get('view')} view, {v.get('eye')} eye",
+                                       data))
+        r = ver.get("renderer", {})
+        sections.append(Section(
+            "Verified: what the print shows",
+            f"Ray-traced from the exported files with Mitsuba {r.get('version', '?')} ({r.get('variant', '?')}, "
+            f"{ver.get('res')} px, {ver.get('spp')} samples per pixel), the cup a perfect mirror, and compared with "
+            "each input as the design meant it, over the pixels where the saucer is seen (directly, or in the "
+            "mirror). From a moved eye the picture may move as a whole: the reference is shifted by the best "
+            f"whole-picture shift first (shown). Pass level {ver.get('min_psnr_db')} dB and "
+            f"{100 * float(ver.get('min_coverage', 0)):.0f} % coverage per view: "
+            + ("every view passes." if ver.get("passed") else "some views are under it."),
+            images=images,
+            grid=(["file", "view", "eye", "PSNR dB", "SSIM", "coverage", "shift px", ""], rows),
+        ))
+    else:
+        sections.append(Section("Verified: what the print shows",
+                                f"Not verified: run 'saucerfab verify {folder.name}' (a folder exported before verify existed needs a new export first)."))
+    chk = _json(folder / "check.json")
+    if chk and isinstance(chk.get("files"), list):
+        rows = []
+        for rep in chk["files"]:
+            for fnd in rep.get("findings", []) or [{"severity": "-", "message": "no findings"}]:
+                if fnd.get("severity") in ("error", "warning", "-"):
+                    rows.append([Path(str(rep.get("path", ""))).name, rep.get("verdict"), fnd.get("severity"),
+                                 fnd.get("message")])
+        sections.append(Section("Printability (saucerfab check)", grid=(["file", "verdict", "severity", "finding"], rows)))
+    meshes = find_mesh_files(folder)
+    if meshes:
+        fmt, path = meshes[0]
+        surf = read_surface(path, fmt, scene)
+        tex_id = int(np.max(surf.face_texture)) if surf.face_texture.size else -1
+        texture = surf.textures[max(tex_id, 0)] if surf.textures else np.full((1, 1, 3), 200, np.uint8)
+        sections.insert(1, _viewer_section(
+            _glb(surf.vertices, surf.faces, surf.corner_uv, texture), scene_raw,
+            f"{path.name} as read back from the file, with the mirror cup",
+        ))
+    return html_report(sections, title=f"saucerfab print: {folder.name}")
+
+
+def refresh_export_report(folder: str | Path) -> Path:
+    """Write ``folder/report.html`` for a print folder (atomically); returns its path."""
+    from saucerfab.fileio import write_text_atomic
+
+    folder = Path(folder)
+    return write_text_atomic(folder / REPORT_NAME, export_report(folder))

@@ -1,0 +1,363 @@
+"""``verify_print``: ray-trace an exported print folder and score it against the inputs.
+
+For each rendered file (the first of OBJ, 3MF, GLB in the folder from every
+eye; any other of those formats from the design eye, as a cross-check that
+the formats print alike), each view (direct, reflected, reflected2) and
+each eye (:mod:`.eyes`):
+
+1. render the view from the eye (:class:`~.raytrace.PrintTracer`), keeping
+   the frame the design used (same target, same angle);
+2. compare with the view's reference picture (the input as the designer
+   meant it, resized to the render with a box filter) over the pixels where
+   the saucer's top is seen - directly for the direct view, in the mirror
+   for the reflected ones - and only pixels seen fully (coverage >= 0.999);
+3. from a moved eye the picture may move as a whole: the reference is
+   shifted by the best whole-picture shift (:func:`~.metrics.best_shift`,
+   up to ``max_shift_fraction`` of the frame) before PSNR and SSIM, and the
+   shift is reported; from the design eye nothing is shifted;
+4. coverage is the share of the frame the saucer fills in that view.
+
+A view passes when its PSNR is at least ``min_psnr_db`` and its coverage at
+least ``min_coverage``; the folder passes when every view of every eye does.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from saucerfab import __version__
+from saucerfab.errors import ConfigError
+from saucerfab.verify.eyes import Eye, EyeSpec, eye_positions
+from saucerfab.verify.metrics import best_shift, psnr, ssim
+from saucerfab.verify.printfolder import (
+    PrintScene,
+    VerifyInputError,
+    find_mesh_files,
+    load_print_scene,
+    load_references,
+    read_surface,
+)
+
+SCHEMA = "saucerfab.verify/1"
+#: default pass level per view, dB: a picture at 20 dB is plainly recognisable
+#: with visible flaws; graphic designs print at 30 dB and more from the design eye
+DEFAULT_MIN_PSNR_DB = 20.0
+#: default least share of the frame the saucer must fill in every view
+DEFAULT_MIN_COVERAGE = 0.5
+DEFAULT_RES = 256
+DEFAULT_SPP = 16
+#: pixels seen at least this fully are compared
+FULL_COVERAGE = 0.999
+#: largest whole-picture shift searched from a moved eye, as a share of the frame
+MAX_SHIFT_FRACTION = 0.1
+MAX_RES = 2048
+MAX_SPP = 1024
+
+#: progress(message, fraction done in [0, 1])
+Progress = Callable[[str, float], None]
+
+
+@dataclass
+class ViewScore:
+    """One view of one file from one eye.
+
+    Attributes:
+        view: ``direct``, ``reflected`` or ``reflected2``.
+        eye: the eye's name.
+        psnr_db: PSNR after the shift (none from the design eye), dB; NaN if nothing is seen.
+        psnr_unshifted_db: PSNR without any shift, dB.
+        ssim: mean SSIM over the compared pixels, after the shift.
+        coverage: share of the frame where the saucer is seen in this view.
+        pixels: pixels compared.
+        shift_px: (dx, dy) the reference was moved (right, down) to match.
+        passed: psnr and coverage at least the levels asked for.
+        picture: the side-by-side picture's file name, if written.
+    """
+
+    view: str
+    eye: str
+    psnr_db: float
+    psnr_unshifted_db: float
+    ssim: float
+    coverage: float
+    pixels: int
+    shift_px: tuple[int, int]
+    passed: bool
+    picture: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        def num(v: float, nd: int) -> float | None:
+            return None if not math.isfinite(v) else round(float(v), nd)
+
+        return {
+            "view": self.view,
+            "eye": self.eye,
+            "psnr_db": num(self.psnr_db, 2),
+            "psnr_unshifted_db": num(self.psnr_unshifted_db, 2),
+            "ssim": num(self.ssim, 4),
+            "coverage": round(float(self.coverage), 4),
+            "pixels": int(self.pixels),
+            "shift_px": [int(self.shift_px[0]), int(self.shift_px[1])],
+            "passed": bool(self.passed),
+            "picture": self.picture,
+        }
+
+
+@dataclass
+class FileScore:
+    """The scores of one rendered file."""
+
+    path: Path
+    format: str
+    views: list[ViewScore] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        # the file's name: it lies in the verified folder, which may be moved or sent on
+        return {"path": self.path.name, "format": self.format, "views": [v.to_dict() for v in self.views]}
+
+
+@dataclass
+class VerifyResult:
+    """What :func:`verify_print` found.
+
+    Attributes:
+        folder: the print folder.
+        files: one entry per rendered file, the primary (fully rendered) first.
+        eyes: every eye rendered (the design eye first).
+        where_to_stand: the design eye relative to the cup (see :func:`where_to_stand`).
+        res, spp: render size (pixels per side) and samples per pixel.
+        min_psnr_db, min_coverage: the pass levels.
+        passed: every view of every file from every eye passed.
+        seconds: wall time of the whole verification.
+        pictures_dir: where the pictures were written, or None.
+        renderer: name, version and variant of the renderer.
+        renders: the primary file's renders, (eye, view) -> (rgb, region), for reports.
+    """
+
+    folder: Path
+    files: list[FileScore]
+    eyes: list[Eye]
+    where_to_stand: dict[str, Any]
+    res: int
+    spp: int
+    min_psnr_db: float
+    min_coverage: float
+    passed: bool
+    seconds: float
+    pictures_dir: Path | None
+    renderer: dict[str, str]
+    renders: dict[tuple[str, str], np.ndarray] = field(default_factory=dict, repr=False)
+
+    @property
+    def exit_code(self) -> int:
+        return 0 if self.passed else 1
+
+    def score(self, view: str, eye: str = "design") -> ViewScore | None:
+        """The primary file's score of ``view`` from ``eye``."""
+        for v in self.files[0].views if self.files else []:
+            if v.view == view and v.eye == eye:
+                return v
+        return None
+
+    def to_dict(self, *, record_times: bool = True) -> dict[str, Any]:
+        """JSON-ready, schema ``saucerfab.verify/1``; without times when ``record_times`` is False."""
+        d = {
+            "schema": SCHEMA,
+            "saucerfab_version": __version__,
+            "folder": str(self.folder),
+            "renderer": dict(self.renderer),
+            "res": self.res,
+            "spp": self.spp,
+            "min_psnr_db": self.min_psnr_db,
+            "min_coverage": self.min_coverage,
+            "passed": self.passed,
+            "exit_code": self.exit_code,
+            "eyes": [
+                {"name": e.name, "position_mm": [round(c, 3) for c in e.position], "offset_mm": list(e.offset_mm)}
+                for e in self.eyes
+            ],
+            "where_to_stand": self.where_to_stand,
+            "files": [f.to_dict() for f in self.files],
+        }
+        if record_times:
+            d["seconds"] = round(self.seconds, 2)
+        return d
+
+
+def where_to_stand(scene: PrintScene) -> dict[str, Any]:
+    """The design eye relative to the cup, in millimetres.
+
+    ``distance_mm``: horizontal distance from the cup's axis; ``height_mm``:
+    height above the cup's standing plane; ``side``: the horizontal direction
+    from the cup to the eye in the file frame (the saucer lies on that side);
+    ``straight_line_mm``: distance from the cup's bottom centre.
+    """
+    cx, cy = scene.cup.center
+    dx, dy, dz = scene.camera[0] - cx, scene.camera[1] - cy, scene.camera[2] - scene.cup.bottom_z
+    horiz = math.hypot(dx, dy)
+    return {
+        "distance_mm": round(horiz, 1),
+        "height_mm": round(dz, 1),
+        "straight_line_mm": round(math.sqrt(horiz**2 + dz**2), 1),
+        "direction_xy": [round(dx / horiz, 4), round(dy / horiz, 4)] if horiz > 0 else [0.0, 0.0],
+        "cup_width_mm": round(scene.cup.width_mm, 3),
+    }
+
+
+def stand_sentence(w: dict[str, Any]) -> str:
+    """``where_to_stand`` as one line for people."""
+    return (
+        f"eye {w['distance_mm']:.0f} mm from the cup's axis on the saucer's side and {w['height_mm']:.0f} mm above "
+        f"the cup's standing plane ({w['straight_line_mm']:.0f} mm from the cup's foot)"
+    )
+
+
+def resize_box(img: np.ndarray, size: int) -> np.ndarray:
+    """(S, S, 3) -> (size, size, 3) float32 by pixel-area averaging (the render's box filter)."""
+    from PIL import Image
+
+    if img.shape[0] == size:
+        return np.asarray(img, np.float32)
+    planes = [
+        np.asarray(Image.fromarray(np.ascontiguousarray(img[..., c], np.float32)).resize((size, size), Image.Resampling.BOX))
+        for c in range(3)
+    ]
+    return np.clip(np.stack(planes, -1), 0.0, 1.0).astype(np.float32)
+
+
+def _check_levels(res: int, spp: int, min_psnr_db: float, min_coverage: float) -> None:
+    if isinstance(res, bool) or not isinstance(res, int) or not 16 <= res <= MAX_RES:
+        raise ConfigError(f"--res must be an integer in [16, {MAX_RES}] pixels, got {res!r}")
+    if isinstance(spp, bool) or not isinstance(spp, int) or not 1 <= spp <= MAX_SPP:
+        raise ConfigError(f"--spp must be an integer in [1, {MAX_SPP}], got {spp!r}")
+    if not (isinstance(min_psnr_db, (int, float)) and math.isfinite(min_psnr_db)):
+        raise ConfigError(f"--min-psnr must be a number of dB, got {min_psnr_db!r}")
+    if not (isinstance(min_coverage, (int, float)) and 0 <= min_coverage <= 1):
+        raise ConfigError(f"--min-coverage must be a share in [0, 1], got {min_coverage!r}")
+
+
+def verify_print(
+    folder: str | Path,
+    *,
+    eyes: EyeSpec | None = None,
+    res: int = DEFAULT_RES,
+    spp: int = DEFAULT_SPP,
+    min_psnr_db: float = DEFAULT_MIN_PSNR_DB,
+    min_coverage: float = DEFAULT_MIN_COVERAGE,
+    pictures_dir: str | Path | None = None,
+    all_formats: bool = True,
+    progress: Progress | None = None,
+) -> VerifyResult:
+    """Render the print folder's files and score each view from each eye.
+
+    Args:
+        folder: a folder written by ``saucerfab export``.
+        eyes: which eyes (default: the design eye and a viewer's two eyes).
+        res: render size, pixels per side.
+        spp: samples per pixel (stratified).
+        min_psnr_db, min_coverage: pass levels per view.
+        pictures_dir: where to write the side-by-side pictures (created;
+            each written atomically); None writes none.
+        all_formats: also render the other textured files from the design eye.
+        progress: called with (message, fraction done).
+
+    Returns:
+        A :class:`VerifyResult`; its ``exit_code`` is 0 when every view passed.
+
+    Raises:
+        VerifyInputError: the folder or a file in it cannot be used (exit 2).
+        ConfigError: bad options.
+    """
+    from saucerfab.verify.raytrace import INTEGRATOR, PrintTracer, mitsuba
+
+    t_start = time.perf_counter()
+    _check_levels(res, spp, min_psnr_db, min_coverage)
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise VerifyInputError(f"{folder} is not a folder; give the folder 'saucerfab export --out' wrote")
+    scene = load_print_scene(folder)
+    views = list(scene.views)
+    refs = {v: resize_box(img, res) for v, img in load_references(folder, views).items()}
+    files = find_mesh_files(folder)
+    if not files:
+        raise VerifyInputError(
+            f"{folder} holds no OBJ, 3MF or GLB file; verify renders textured print files "
+            "(export with --formats obj or 3mf)"
+        )
+    if not all_formats:
+        files = files[:1]
+    spec = eyes or EyeSpec()
+    all_eyes = eye_positions(spec, scene.camera, scene.views["direct"].target)
+    jobs = len(all_eyes) * len(views) + (len(files) - 1) * len(views)
+    done = 0
+
+    def step(msg: str) -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(msg, done / max(jobs, 1))
+
+    mi = mitsuba()
+    pictures = Path(pictures_dir) if pictures_dir is not None else None
+    if pictures is not None:
+        pictures.mkdir(parents=True, exist_ok=True)
+    scores: list[FileScore] = []
+    renders: dict[tuple[str, str], np.ndarray] = {}
+    max_shift = round(MAX_SHIFT_FRACTION * res)
+    for k, (fmt, path) in enumerate(files):
+        surface = read_surface(path, fmt, scene)
+        tracer = PrintTracer(surface, scene.cup)
+        fs = FileScore(path, fmt)
+        for eye in all_eyes if k == 0 else all_eyes[:1]:
+            for view in views:
+                r = tracer.render(eye.position, scene.views[view], res, spp)
+                cov = r.direct if view == "direct" else r.reflected
+                region = cov >= FULL_COVERAGE
+                ref = refs[view]
+                p0 = psnr(r.rgb, ref, region)
+                if eye.name == "design":
+                    sh_dx, sh_dy, p1, reg1, ref1 = 0, 0, p0, region, ref
+                else:
+                    from saucerfab.verify.metrics import shifted
+
+                    sh = best_shift(r.rgb, ref, region, max_shift)
+                    sh_dx, sh_dy, p1, reg1 = sh.dx, sh.dy, sh.psnr_db, sh.region
+                    ref1 = shifted(ref, sh.dx, sh.dy)[0]
+                s = ssim(r.rgb, ref1, reg1)
+                coverage = float(cov.mean())
+                ok = math.isfinite(p1) and p1 >= min_psnr_db and coverage >= min_coverage
+                score = ViewScore(view, eye.name, p1, p0, s, coverage, int(reg1.sum()), (sh_dx, sh_dy), ok)
+                if pictures is not None:
+                    from saucerfab.verify.pictures import write_view_picture
+
+                    stem = f"{eye.name}_{view}" if k == 0 else f"{fmt}_{eye.name}_{view}"
+                    score.picture = write_view_picture(pictures, stem, r.rgb, ref1, reg1, score).name
+                if k == 0:
+                    renders[(eye.name, view)] = r.rgb
+                    renders[(eye.name, view + ":region")] = reg1
+                fs.views.append(score)
+                step(f"{path.name}: {view} view from the {eye.name} eye {score.psnr_db:.1f} dB")
+        scores.append(fs)
+    passed = all(v.passed for f in scores for v in f.views)
+    return VerifyResult(
+        folder=folder,
+        files=scores,
+        eyes=all_eyes,
+        where_to_stand=where_to_stand(scene),
+        res=res,
+        spp=spp,
+        min_psnr_db=float(min_psnr_db),
+        min_coverage=float(min_coverage),
+        passed=passed,
+        seconds=time.perf_counter() - t_start,
+        pictures_dir=pictures,
+        renderer={"name": "mitsuba", "version": str(mi.__version__), "variant": str(mi.variant()), "integrator": str(INTEGRATOR["type"])},
+        renders=renders,
+    )

@@ -1,0 +1,50 @@
+"""Verify's pictures: the ray-traced view, the reference and a difference heat map, side by side."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from saucerfab.verify.core import ViewScore
+
+#: absolute difference (mean over RGB, sRGB units) shown at the top of the heat map's scale
+HEAT_MAX = 0.5
+#: grey of pixels not compared (the saucer is not seen fully there)
+NOT_COMPARED = (0.35, 0.35, 0.35)
+
+
+def difference_map(render: np.ndarray, ref: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """(S, S, 3) float: |render - ref| averaged over RGB, 0..HEAT_MAX on ``magma``; grey outside ``region``."""
+    from matplotlib import colormaps
+
+    d = np.abs(np.asarray(render, np.float32) - np.asarray(ref, np.float32)).mean(axis=2)
+    heat = colormaps["magma"](np.clip(d / HEAT_MAX, 0.0, 1.0))[..., :3].astype(np.float32)
+    heat[~np.asarray(region, bool)] = NOT_COMPARED
+    return heat
+
+
+def view_picture(render: np.ndarray, ref: np.ndarray, region: np.ndarray, score: ViewScore) -> np.ndarray:
+    """The three panels as one (H, W, 3) uint8 picture, titled with the scores."""
+    from saucerfab.report import side_by_side
+
+    shift = "" if score.shift_px == (0, 0) else f", shifted {score.shift_px[0]:+d},{score.shift_px[1]:+d} px"
+    return side_by_side(
+        [
+            (f"printed: {score.view}, {score.eye} eye", render),
+            (f"meant{shift}", ref),
+            (f"|difference| {score.psnr_db:.1f} dB, SSIM {score.ssim:.2f}", difference_map(render, ref, region)),
+        ],
+        height=max(256, render.shape[0]),
+    )
+
+
+def write_view_picture(folder: Path, stem: str, render: np.ndarray, ref: np.ndarray, region: np.ndarray,
+                       score: ViewScore) -> Path:
+    """Write :func:`view_picture` as ``folder/stem.png`` (atomically); returns the path."""
+    from saucerfab.fileio import write_bytes_atomic
+    from saucerfab.report import to_png_bytes
+
+    return write_bytes_atomic(folder / f"{stem}.png", to_png_bytes(view_picture(render, ref, region, score)))
