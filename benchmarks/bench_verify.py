@@ -29,10 +29,21 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_design import PAIRS, SAMPLES, machine
+from bench_design import PAIRS as GRAPHIC_PAIRS
+from bench_design import SAMPLES, machine
 
 from saucerfab.cli import main as cli
 from saucerfab.verify import EyeSpec, verify_print
+
+#: full-bleed photographs shipped in samples/photos (CC0 / public domain, from
+#: scikit-image's data; provenance in samples/photos/README.md)
+PHOTO_PAIRS = {
+    "chelsea-coffee": ("photos/chelsea.png", "photos/coffee.png"),
+    "astronaut-rocket": ("photos/astronaut.png", "photos/rocket.jpg"),
+    "coffee-hubble": ("photos/coffee.png", "photos/hubble_deep_field.jpg"),
+    "rocket-chelsea": ("photos/rocket.jpg", "photos/chelsea.png"),
+}
+PAIRS = {**GRAPHIC_PAIRS, **PHOTO_PAIRS}
 
 
 def run_pair(pair: str, args: argparse.Namespace, tmp: Path) -> dict:
@@ -96,7 +107,8 @@ def table(rows: list[dict], label: str) -> str:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--pairs", default="all", help=f"comma-separated or 'all': {', '.join(PAIRS)}")
+    p.add_argument("--pairs", default="all",
+                   help=f"comma-separated, or graphics, photos, all: {', '.join(PAIRS)}")
     p.add_argument("--design-args", default="", help="extra 'saucerfab design' options, e.g. '--frames contain'")
     p.add_argument("--label", default="default", help="name of this configuration in the table")
     p.add_argument("--resolution", type=int, default=None, help="design --resolution (default: the design default)")
@@ -106,7 +118,11 @@ def main() -> int:
     p.add_argument("--keep", help="keep the verify pictures here (LABEL/PAIR/verify)")
     p.add_argument("--json", help="also write the rows as JSON to this file")
     args = p.parse_args()
-    pairs = list(PAIRS) if args.pairs == "all" else args.pairs.split(",")
+    groups = {"all": list(PAIRS), "graphics": list(GRAPHIC_PAIRS), "photos": list(PHOTO_PAIRS)}
+    pairs = groups.get(args.pairs) or args.pairs.split(",")
+    unknown = [x for x in pairs if x not in PAIRS]
+    if unknown:
+        p.error(f"unknown pair(s) {', '.join(unknown)}; choose from {', '.join(PAIRS)}, graphics, photos or all")
     print(f"machine: {machine()}", flush=True)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

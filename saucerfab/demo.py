@@ -49,8 +49,8 @@ def run(argv: list[str] | None = None) -> int:
             "--direct", str(samples / "direct_heart.png"),
             "--reflected", str(samples / "reflected_star.png"),
             "--shape", "waves",
-            "--frames", "contain",
             "--out", str(out / "design"),
+            "--force",  # the demo's own folder from an earlier run
             *size,
         ],
         [

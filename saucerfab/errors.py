@@ -29,6 +29,10 @@ class ImageError(InputFileError):
     """An input image cannot be used (unreadable, decompression bomb, empty mask)."""
 
 
+class MaskError(ImageError):
+    """An image has no usable foreground mask (all foreground, all background, no plain background)."""
+
+
 class ShapeError(InputFileError):
     """A base-shape heightfield file cannot be used (wrong size, NaN, unreadable)."""
 

@@ -137,3 +137,43 @@ def finish_print(
     except (OSError, ValueError) as exc:  # the print files are complete; say why the page is missing
         done.notes.append(f"report.html not written: {exc}")
     return done
+
+
+def verify_design(
+    design_dir: str | Path,
+    *,
+    printer: str = "j55",
+    cup_diameter_mm: float | None = None,
+    record_times: bool = True,
+    progress: Any = None,
+) -> Any:
+    """Quick-verify a design folder through a trial export; results in ``design_dir/verify/``.
+
+    The design is exported (OBJ, for ``printer``) to a temporary folder, that
+    print is verified as :func:`finish_print` does, the pictures and
+    ``verify.json`` (with the printer named) go into the design folder's
+    ``verify/`` (replaced as a whole) and its ``report.html`` is rewritten
+    with them. Returns the :class:`~saucerfab.verify.VerifyResult`.
+
+    Raises:
+        SaucerfabError: the trial export or the verify cannot be made.
+    """
+    from saucerfab.fabricate.pipeline import export_design
+    from saucerfab.fileio import atomic_dir
+    from saucerfab.report_page import write_design_report
+    from saucerfab.verify import verify_print
+
+    design_dir = Path(design_dir)
+    with tempfile.TemporaryDirectory(prefix="saucerfab-trial-") as tmp:
+        trial = export_design(design_dir, Path(tmp) / "print", printer=printer, cup_diameter_mm=cup_diameter_mm,
+                              formats=["obj"])
+        with atomic_dir(design_dir / "verify") as vtmp:
+            res = verify_print(trial.out, res=QUICK_RES, spp=QUICK_SPP, pictures_dir=vtmp, all_formats=False,
+                               progress=progress)
+            doc = res.to_dict(record_times=record_times)
+            doc["folder"] = "(a trial export of this design)"
+            doc["printer"] = trial.printer
+            doc["cup_diameter_mm"] = trial.cup_diameter_mm
+            (vtmp / "verify.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    write_design_report(design_dir)
+    return res

@@ -53,7 +53,7 @@ from typing import Literal
 
 import numpy as np
 
-from saucerfab.errors import ConfigError, ImageError
+from saucerfab.errors import ConfigError, ImageError, MaskError
 
 #: default limits for untrusted images (checked before decoding)
 DEFAULT_MAX_PIXELS = 64_000_000
@@ -78,7 +78,7 @@ BORDER_RING_FRACTION = 0.02
 #: 1 - this) has no usable subject
 MIN_FOREGROUND_FRACTION = 0.001
 
-MaskMethod = Literal["auto", "alpha", "file", "threshold"]
+MaskMethod = Literal["auto", "alpha", "file", "threshold", "none"]
 
 # First bytes of formats people try; used only to word the error message.
 _MAGIC = (
@@ -674,6 +674,25 @@ def threshold_mask(rgb: np.ndarray, *, alpha: np.ndarray | None = None) -> np.nd
     return mask
 
 
+#: a background is "plain" when this share of its pixels lies within PLAIN_DISTANCE of its colour
+PLAIN_SHARE = 0.85
+PLAIN_DISTANCE = 0.12
+
+
+def plain_background_share(view: ViewImage) -> float:
+    """Share of a fitted image's background pixels (not mask, not padding) near its background colour.
+
+    Distances are Euclidean in sRGB [0, 1]^3. A subject on a plain or
+    transparent background gives about 1; a full-bleed photograph far less.
+    """
+    rgb = view.flattened()
+    bg = ~view.mask & ~view.fill
+    if not bg.any():
+        return 0.0
+    d = np.sqrt(((rgb[bg] - view.background.reshape(1, 3)) ** 2).sum(axis=-1))
+    return float(np.mean(d < PLAIN_DISTANCE))
+
+
 def _load_mask_file(mask_path: str | os.PathLike[str], max_pixels: int, max_bytes: int) -> tuple[np.ndarray, str]:
     """A mask file as (H, W) float32 coverage (white = 1) and its name."""
     m = load_image(mask_path, max_pixels=max_pixels, max_bytes=max_bytes)
@@ -694,7 +713,7 @@ def _check_fraction(mask: np.ndarray, content: np.ndarray, source: str, name: st
         what = "no background (everything is foreground)"
     else:
         return
-    raise ImageError(
+    raise MaskError(
         f"the {source} foreground mask of image {name!r} has {what}. Give a mask file "
         "(white = subject, black = background) or an image with a clear subject on a "
         "plain background or a transparent background."
@@ -713,9 +732,11 @@ def _mask_in_frame(
     max_bytes: int,
 ) -> tuple[np.ndarray, str]:
     """Foreground mask (H, W) bool of an image in its frame, and the method used."""
-    if method not in ("auto", "alpha", "file", "threshold"):
-        raise ConfigError(f"unknown mask method {method!r}; use auto, alpha, file or threshold")
+    if method not in ("auto", "alpha", "file", "threshold", "none"):
+        raise ConfigError(f"unknown mask method {method!r}; use auto, alpha, file, threshold or none")
     h, w = rgb.shape[:2]
+    if method == "none":  # no subject wanted (no enhancement): an empty mask, nothing to refuse
+        return np.zeros((h, w), bool), "none"
     content = np.ones((h, w), bool) if fill is None else ~fill
     if method == "auto":
         if mask_path is not None:

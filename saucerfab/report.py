@@ -393,10 +393,11 @@ def energy_plot(
         ax.set_yscale("symlog", linthresh=float(nonzero.min()) if nonzero.size else 1.0)
     elif drawn and np.nanmax(values, initial=0.0) > 0:
         ax.set_yscale("log")
+    labels = []
     for n, k in enumerate(starts):
         if n > 0:
             ax.axvline(x[k], color="0.4", ls="--", lw=0.9)
-        ax.annotate(
+        labels.append(ax.annotate(
             stages[k],
             xy=(x[k], 1.0),
             xycoords=("data", "axes fraction"),
@@ -404,7 +405,7 @@ def energy_plot(
             textcoords="offset points",
             fontsize=8,
             color="0.25",
-        )
+        ))
     has_time = not np.isnan(_series(log, "time_s")).all()
     ax.set_xlabel("time (s)" if has_time else "iteration")
     ax.set_ylabel("energy")
@@ -414,7 +415,27 @@ def energy_plot(
         ax.legend(loc="best", fontsize=8)
     ax.grid(True, which="major", alpha=0.3)
     fig.tight_layout()
+    _stagger_labels(fig, labels)
     return _figure_png(fig)
+
+
+def _stagger_labels(fig, labels: Sequence[Any]) -> None:  # type: ignore[no-untyped-def]
+    """Move each stage label down a row until its box meets no earlier label's.
+
+    Short stages start close together, so their names would print over
+    each other on one row; measured after the layout, in pixels.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    placed: list[Any] = []
+    for ann in labels:
+        for row in range(len(labels)):
+            ann.xyann = (3, -12 - 11 * row)
+            box = ann.get_window_extent(renderer).padded(1.0)
+            if not any(box.overlaps(b) for b in placed):
+                break
+        placed.append(box)
 
 
 # --------------------------------------------------------------------------- HTML

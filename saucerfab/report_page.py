@@ -111,12 +111,14 @@ def _stand(where: dict[str, Any]) -> str:
 # --------------------------------------------------------------------------- design folder
 
 
-def design_report(design: Design, previews: Mapping[str, bytes]) -> str:
+def design_report(design: Design, previews: Mapping[str, bytes], folder: Path | None = None) -> str:
     """The HTML page of a design folder (titled by its input pictures, so it does not depend on the folder's name).
 
     Args:
         design: the design (as written or loaded).
         previews: PNG bytes by preview file name (``composite.png``...).
+        folder: the design folder, when it exists: its ``verify/`` results
+            (``saucerfab design``'s quick verify of a trial export) are shown.
     """
     from saucerfab import __version__
     from saucerfab.fabricate.scene_json import viewing_dict
@@ -174,6 +176,14 @@ def design_report(design: Design, previews: Mapping[str, bytes]) -> str:
         "files, are in the report 'saucerfab export' writes beside the print files.",
         images=[(c, b) for c, b in views if b],
     ))
+    ver = verify_section(folder, note=(
+        "A trial export of this design (OBJ, for the printer named in verify/verify.json), verified right "
+        "after the design. ")) if folder is not None else None
+    sections.append(ver or Section(
+        "Verified: what the print shows",
+        "Export the design ('saucerfab export'): the print folder's report.html shows the exported files "
+        "ray-traced from the design eye and both eyes. ('saucerfab design' verifies a trial export itself "
+        "unless --no-verify.)"))
     hc = pic("height_change.png")
     if hc:
         sections.append(Section("Height change", images=[("|h - z| over the saucer", hc)]))
@@ -211,7 +221,45 @@ def write_design_report(folder: str | Path) -> Path:
     folder = Path(folder)
     previews = {p.name: p.read_bytes() for p in sorted((folder / "previews").glob("*.png"))
                 if p.stat().st_size <= _MAX_PICTURE_BYTES}
-    return write_text_atomic(folder / REPORT_NAME, design_report(load_design(folder), previews))
+    return write_text_atomic(folder / REPORT_NAME, design_report(load_design(folder), previews, folder))
+
+
+def verify_section(folder: Path, *, note: str = "") -> Section | None:
+    """The verify results in ``folder/verify/`` (verify.json and its pictures) as a section, or None."""
+    ver = _json(folder / "verify" / "verify.json")
+    if not (ver and ver.get("schema") == "saucerfab.verify/1"):
+        return None
+    rows, images = [], []
+    for f in ver.get("files", []):
+        for v in f.get("views", []):
+            shift = v.get("shift_px") or [0, 0]
+            rows.append([
+                Path(str(f.get("path", ""))).name, v.get("view"), v.get("eye"),
+                "-" if v.get("psnr_db") is None else f"{v['psnr_db']:.1f}",
+                "-" if v.get("ssim") is None else f"{v['ssim']:.3f}",
+                f"{100 * v.get('coverage', 0):.1f} %", f"{shift[0]:+d}, {shift[1]:+d}",
+                "pass" if v.get("passed") else "LOW",
+            ])
+            name = v.get("picture")
+            if isinstance(name, str) and "/" not in name and "\\" not in name:
+                data = _read(folder / "verify" / name, _MAX_PICTURE_BYTES)
+                if data:
+                    images.append((f"{Path(str(f.get('path', ''))).name}: {v.get('view')} view, {v.get('eye')} eye",
+                                   data))
+    r = ver.get("renderer", {})
+    return Section(
+        "Verified: what the print shows",
+        note
+        + f"Ray-traced from the exported files with Mitsuba {r.get('version', '?')} ({r.get('variant', '?')}, "
+        f"{ver.get('res')} px, {ver.get('spp')} samples per pixel), the cup a perfect mirror, and compared with "
+        "each input as the design meant it, over the pixels where the saucer is seen (directly, or in the "
+        "mirror). From a moved eye the picture may move as a whole: the reference is shifted by the best "
+        f"whole-picture shift first (shown). Pass level {ver.get('min_psnr_db')} dB and "
+        f"{100 * float(ver.get('min_coverage', 0)):.0f} % coverage per view: "
+        + ("every view passes." if ver.get("passed") else "some views are under it."),
+        images=images,
+        grid=(["file", "view", "eye", "PSNR dB", "SSIM", "coverage", "shift px", ""], rows),
+    )
 
 
 # --------------------------------------------------------------------------- print folder
@@ -250,41 +298,15 @@ def export_report(folder: str | Path) -> str:
         grid=(["file", "bytes", "sha256"], [[n, f"{d.get('bytes', 0):,}", str(d.get("sha256", ""))[:16]]
                                             for n, d in sorted(files.items())]),
     ))
-    ver = _json(folder / "verify" / "verify.json")
-    if ver and ver.get("schema") == "saucerfab.verify/1":
-        rows, images = [], []
-        for f in ver.get("files", []):
-            for v in f.get("views", []):
-                shift = v.get("shift_px") or [0, 0]
-                rows.append([
-                    Path(str(f.get("path", ""))).name, v.get("view"), v.get("eye"),
-                    "-" if v.get("psnr_db") is None else f"{v['psnr_db']:.1f}",
-                    "-" if v.get("ssim") is None else f"{v['ssim']:.3f}",
-                    f"{100 * v.get('coverage', 0):.1f} %", f"{shift[0]:+d}, {shift[1]:+d}",
-                    "pass" if v.get("passed") else "LOW",
-                ])
-                name = v.get("picture")
-                if isinstance(name, str) and "/" not in name and "\\" not in name:
-                    data = _read(folder / "verify" / name, _MAX_PICTURE_BYTES)
-                    if data:
-                        images.append((f"{Path(str(f.get('path', ''))).name}: {v.get('view')} view, {v.get('eye')} eye",
-                                       data))
-        r = ver.get("renderer", {})
-        sections.append(Section(
-            "Verified: what the print shows",
-            f"Ray-traced from the exported files with Mitsuba {r.get('version', '?')} ({r.get('variant', '?')}, "
-            f"{ver.get('res')} px, {ver.get('spp')} samples per pixel), the cup a perfect mirror, and compared with "
-            "each input as the design meant it, over the pixels where the saucer is seen (directly, or in the "
-            "mirror). From a moved eye the picture may move as a whole: the reference is shifted by the best "
-            f"whole-picture shift first (shown). Pass level {ver.get('min_psnr_db')} dB and "
-            f"{100 * float(ver.get('min_coverage', 0)):.0f} % coverage per view: "
-            + ("every view passes." if ver.get("passed") else "some views are under it."),
-            images=images,
-            grid=(["file", "view", "eye", "PSNR dB", "SSIM", "coverage", "shift px", ""], rows),
-        ))
-    else:
-        sections.append(Section("Verified: what the print shows",
-                                f"Not verified: run 'saucerfab verify {folder.name}' (a folder exported before verify existed needs a new export first)."))
+    ver_section = verify_section(folder)
+    if ver_section is None:
+        from saucerfab.design import reference_name
+
+        why = (f"run 'saucerfab verify {folder.name}'" if (folder / reference_name("direct")).is_file() else
+               "the design has no reference pictures (a synthetic design, or one made before 'saucerfab design' "
+               "wrote them): design it again from its pictures, then export")
+        ver_section = Section("Verified: what the print shows", f"Not verified: {why}.")
+    sections.append(ver_section)
     chk = _json(folder / "check.json")
     if chk and isinstance(chk.get("files"), list):
         rows = []

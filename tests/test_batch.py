@@ -176,6 +176,15 @@ def test_reference_outcomes(reference: tuple[Path, object]) -> None:
     html = (out / HTML_NAME).read_text()
     assert "broken-upload" in html and "truncated" in html and "<script" not in html
     assert f'<img src="{RAW_JOB}/design/previews/composite.png"' in html  # the design's preview
+    # each job's print report (and a raw job's design report) is linked, and is there
+    for job_id in GOOD_JOBS:
+        assert f'href="{job_id}/export/report.html">print report' in html, job_id
+        assert (out / job_id / "export" / "report.html").is_file()
+        assert (out / job_id / "export" / "verify" / "verify.json").is_file() or "not verified" in (
+            out / job_id / "export" / "report.html").read_text(encoding="utf-8").lower()
+    assert f'href="{RAW_JOB}/design/report.html">design report' in html
+    raw_verify = json.loads((out / RAW_JOB / "export" / "verify" / "verify.json").read_text())
+    assert raw_verify["files"][0]["views"][0]["eye"] == "design" and "seconds" not in raw_verify
     assert_no_temporaries(out)
 
 

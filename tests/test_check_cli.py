@@ -254,3 +254,71 @@ def test_table_names_a_location_once() -> None:
     text = buf.getvalue()
     assert text.count("(60.93, 74.92, 18.50) mm") == 1
     assert "3 open edges  at (1.00, 2.00, 3.00) mm" in text
+
+
+def _deep_files(root: Path) -> list[Path]:
+    """The issue's layout: a printable saucer and an open box deep under runs/e1."""
+    deep = root / "tmp" / "some" / "deep" / "folder" / "runs" / "e1"
+    deep.mkdir(parents=True)
+    V, F, uv = fx.saucer_solid(12)
+    Vb, Fb = fx.box()
+    return [
+        fx.write_3mf(deep / "saucer.3mf", V, F, uv=uv, texture=fx.png_bytes(256, 256)),
+        fx.write_stl(deep / "open_box_with_a_long_name.stl", Vb, Fb[1:]),
+    ]
+
+
+def _row_shown_whole(text: str, name: str, fmt: str, verdict: str) -> bool:
+    """Some line holds the file name, its format and its verdict, none of them cut."""
+    row = re.compile(re.escape(name) + r"\s.*\b" + fmt + r"\b.*(?<![\w-])" + re.escape(verdict) + r"(?![\w-])")
+    return any(row.search(line) for line in text.splitlines())
+
+
+def test_table_at_80_columns_keeps_verdicts_and_file_names(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _deep_files(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("COLUMNS", "80")
+    saucer = "tmp/some/deep/folder/runs/e1/saucer.3mf"
+    box = "tmp/some/deep/folder/runs/e1/open_box_with_a_long_name.stl"
+    assert main(["check", saucer, box]) == 1
+    out = capsys.readouterr().out
+    assert _row_shown_whole(out, "saucer.3mf", "3mf", "printable"), out
+    assert _row_shown_whole(out, "open_box_with_a_long_name.stl", "stl", "not printable"), out
+    assert out.strip().splitlines()[-1] == "2 files: 1 printable, 1 not printable, 0 unreadable (exit 1)"
+
+
+@pytest.mark.parametrize("width", [60, 80, 100, 120, 160, 300])
+def test_table_fits_the_width_or_gives_one_line_per_file(tmp_path: Path, width: int) -> None:
+    import io
+
+    from rich.console import Console
+
+    from saucerfab.check.report import render_table
+
+    paths = _deep_files(tmp_path)
+    reports = [check_mesh(p) for p in paths]
+    buf = io.StringIO()
+    render_table(reports, console=Console(file=buf, width=width, highlight=False, soft_wrap=False))
+    text = buf.getvalue()
+    table = [line for line in text.splitlines() if line[:1] in "┏┃┡│└"]
+    assert all(len(line) <= width for line in table), text  # a table is never wider than the console
+    assert _row_shown_whole(text, "saucer.3mf", "3mf", "printable"), text
+    assert _row_shown_whole(text, "open_box_with_a_long_name.stl", "stl", "not printable"), text
+    if width >= 200:
+        assert table and str(paths[1]) in text  # room enough: the table, with the whole path
+
+
+def test_shorten_middle_keeps_the_file_name() -> None:
+    from saucerfab.check.report import shorten_middle
+
+    path = "tmp/some/deep/folder/runs/e1/saucer.3mf"
+    assert shorten_middle(path, 100) == path
+    assert shorten_middle(path, 24) == "tmp/some/de\u20261/saucer.3mf"
+    assert shorten_middle(path, 12) == "\u2026/saucer.3mf"
+    assert shorten_middle(path, 5).endswith("/saucer.3mf")  # never the name itself
+    assert shorten_middle("C:\\runs\\e1\\deep\\saucer.3mf", 16, "...") == "C:...\\saucer.3mf"
+    for width in range(12, len(path)):
+        short = shorten_middle(path, width)
+        assert len(short) == width and short.endswith("/saucer.3mf")

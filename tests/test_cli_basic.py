@@ -130,3 +130,76 @@ def test_ctrl_c_exits_130(capsys: pytest.CaptureFixture[str], monkeypatch: pytes
     monkeypatch.setattr(scene_cmd, "run", interrupted)
     code, _, err = run_cli(["scene"], capsys)
     assert code == 130 and "interrupted" in err and "Traceback" not in err
+
+
+def _run_into_closed_pipe(argv: list[str]) -> tuple[int, str]:
+    """Run ``python -m saucerfab ARGV`` with stdout a pipe whose reader has already gone."""
+    import os
+    import subprocess
+    import sys
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # every write to stdout now fails with EPIPE, as after `| head -1` has exited
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "saucerfab", *argv],
+            check=False, stdout=write_end, stderr=subprocess.PIPE, text=True, timeout=120,
+        )
+    finally:
+        os.close(write_end)
+    return proc.returncode, proc.stderr
+
+
+@pytest.mark.parametrize("argv", [["check", "--schema"], ["printers"], ["--version"]])
+def test_a_closed_stdout_pipe_exits_quietly(argv: list[str]) -> None:
+    code, err = _run_into_closed_pipe(argv)
+    assert code == 0, err
+    assert "Broken pipe" not in err and "Traceback" not in err and "Exception ignored" not in err, err
+
+
+def test_check_schema_into_head_exits_quietly() -> None:
+    import subprocess
+    import sys
+
+    # the issue's own command line; PIPESTATUS gives saucerfab's exit code without pipefail
+    script = f'"{sys.executable}" -m saucerfab check --schema | head -1; echo "saucerfab exit ${{PIPESTATUS[0]}}" >&2'
+    proc = subprocess.run(["bash", "-c", script], check=False, capture_output=True, text=True, timeout=120)
+    assert proc.stdout == "{\n"
+    assert "Broken pipe" not in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.strip().splitlines()[-1] == "saucerfab exit 0", proc.stderr
+
+
+def test_errors_still_reported_when_stdout_is_a_closed_pipe() -> None:
+    code, err = _run_into_closed_pipe(["check"])  # no files: a usage error on stderr, exit 2
+    assert code == 2 and "give one or more mesh files" in err and "Broken pipe" not in err
+
+
+def _python_floor(requires: str) -> tuple[int, int]:
+    """The lowest Python that ``requires-python`` (``>=3.11``, ``>=3.11,<4``, ``~=3.11``) admits."""
+    import re
+
+    floors = []
+    for clause in requires.split(","):
+        m = re.fullmatch(r"\s*(>=|~=|==|>)\s*(\d+)\.(\d+)(?:\.[\d*]+)?\s*", clause)
+        if m:
+            major, minor = int(m.group(2)), int(m.group(3)) + (m.group(1) == ">")
+            floors.append((major, minor))
+    assert floors, f"requires-python {requires!r} names no lower bound"
+    return max(floors)
+
+
+def test_requires_python_admits_no_python_without_tomllib() -> None:
+    import re
+    import tomllib
+
+    root = Path(saucerfab.__file__).resolve().parent
+    pyproject = tomllib.loads((root.parent / "pyproject.toml").read_text(encoding="utf-8"))
+    floor = _python_floor(pyproject["project"]["requires-python"])
+    uses = [
+        str(p.relative_to(root.parent))
+        for p in sorted(root.rglob("*.py"))
+        if re.search(r"^\s*(import tomllib|from tomllib import)", p.read_text(encoding="utf-8"), re.MULTILINE)
+    ]
+    assert uses, "nothing imports tomllib any more: this test can go"
+    assert floor >= (3, 11), f"requires-python lets Python {floor[0]}.{floor[1]} install, but {uses} import tomllib (3.11+)"
+    assert _python_floor(">=3.10") == (3, 10) and _python_floor(">3.10,<4") == (3, 11)

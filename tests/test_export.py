@@ -530,7 +530,7 @@ def _no_leftovers(parent: Path) -> None:
     "kwargs, error, needle",
     [
         ({"formats": ["3mf", "fbx"]}, ExportError, "unknown export format 'fbx'"),
-        ({"formats": ["glb"], "printer": "j55"}, ExportError, "does not accept 'glb'"),
+        ({"formats": ["3mf", "step"], "printer": "bureau"}, ExportError, "unknown export format 'step'"),
         ({"cup_diameter_mm": 0.0}, ConfigError, "positive"),
         ({"cup_diameter_mm": -5.0}, ConfigError, "positive"),
         ({"cup_diameter_mm": float("nan")}, ConfigError, "positive"),
@@ -622,9 +622,10 @@ def test_cli_export_prints_summary_and_checks(design: Design, tmp_path: Path, ca
     assert "[100.0%]" in captured.err  # progress
     assert "check" in captured.out
     assert (out / "saucer.3mf").is_file() and (out / "saucer.obj").is_file()
-    code = main(["export", str(folder), "--formats", "glb", "--out", str(tmp_path / "x")])
+    code = main(["export", str(folder), "--formats", "fbx", "--out", str(tmp_path / "x")])
     captured = capsys.readouterr()
-    assert code == 2 and "does not accept 'glb'" in captured.err and "Traceback" not in captured.err
+    assert code == 2 and "unknown export format 'fbx'" in captured.err and "Traceback" not in captured.err
+    assert not (tmp_path / "x").exists()
     code = main(["export", str(tmp_path / "missing"), "--out", str(tmp_path / "y")])
     assert code == 2 and not (tmp_path / "y").exists()
     code = main(["export", str(folder), "--cup-diameter-mm", "-1", "--out", str(tmp_path / "y")])
@@ -644,3 +645,91 @@ def test_cli_export_json(design: Design, tmp_path: Path, capsys: pytest.CaptureF
     assert d["checks"][0]["verdict"] in ("printable", "not printable")  # read, not "unreadable"
     assert code == d["exit_code"] == d["checks"][0]["exit_code"]
     assert json.loads((tmp_path / "o" / "scene.json").read_text())["seat"]["kind"] == "ring"
+
+
+def test_cli_export_refuses_no_seat_with_an_explicit_seat(design: Design, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = save_design(design, tmp_path / "design")
+    quick = ["--formats", "stl", "--texture-px", str(ATLAS), "--cup-diameter-mm", str(CUP_MM), "--no-check", "--no-verify", "-q"]
+    for seat in ("ring", "recess"):
+        code = main(["export", str(folder), "--no-seat", "--seat", seat, *quick, "-o", str(tmp_path / "o")])
+        err = capsys.readouterr().err
+        assert code == 2 and "--no-seat" in err and f"--seat {seat}" in err and "Traceback" not in err
+        assert not (tmp_path / "o").exists()
+    # --no-seat alone, or with --seat none, is no seat
+    assert main(["export", str(folder), "--seat", "none", "--no-seat", *quick, "-o", str(tmp_path / "o")]) == 0
+    assert json.loads((tmp_path / "o" / "export.json").read_text())["seat"]["kind"] == "none"
+    capsys.readouterr()
+
+
+def test_cli_export_refuses_to_replace_another_designs_export(design: Design, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    a = save_design(replace(design, inputs={"direct": {"file": "a.png", "sha256": "1" * 64}}), tmp_path / "a")
+    b = save_design(replace(design, inputs={"direct": {"file": "b.png", "sha256": "2" * 64}}), tmp_path / "b")
+    out = tmp_path / "print"
+    quick = ["--formats", "stl", "--texture-px", str(ATLAS), "--cup-diameter-mm", str(CUP_MM), "--no-check", "--no-verify", "-q"]
+    assert main(["export", str(a), *quick, "-o", str(out)]) == 0
+    assert main(["export", str(a), *quick, "-o", str(out)]) == 0  # the same design again: allowed
+    capsys.readouterr()
+    before = (out / "export.json").read_bytes()
+    code = main(["export", str(b), *quick, "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and str(out) in err and "--force" in err and "a.png" in err
+    assert (out / "export.json").read_bytes() == before  # the other design's export is untouched
+    assert main(["export", str(b), *quick, "--force", "-o", str(out)]) == 0
+    assert json.loads((out / "export.json").read_text())["design"]["inputs"]["direct"]["file"] == "b.png"
+    capsys.readouterr()
+
+
+# --------------------------------------------------------------------------- formats a profile does not list (issue 14)
+
+
+def test_packaged_printer_profiles_are_the_source_ones() -> None:
+    # saucerfab/data/printers is what an installed package reads; it must say what printers/ says
+    source = {p.name: p.read_bytes() for p in sorted((ROOT / "printers").glob("*.toml"))}
+    packaged = {p.name: p.read_bytes() for p in sorted((ROOT / "saucerfab" / "data" / "printers").glob("*.toml"))}
+    assert source and packaged == source
+
+
+@pytest.mark.parametrize("printer", ["j55", "j850"])
+def test_stratasys_profiles_take_glb(design: Design, tmp_path: Path, printer: str) -> None:
+    # GrabCAD Print (J55, J850) reads colour and texture from glTF/GLB: help.grabcad.com article 214
+    assert "glb" in load_profile(printer).accepted_formats
+    res = export_design(design, tmp_path / "g", printer=printer, cup_diameter_mm=CUP_MM, formats=["3mf", "glb"],
+                        options=FabOptions(texture_px=ATLAS))
+    assert res.formats == ["3mf", "glb"] and (res.out / "saucer.glb").is_file()
+    assert not any("does not list" in w for w in res.warnings), res.warnings
+    from saucerfab.check import check_mesh
+
+    assert "format_not_accepted" not in check_mesh(res.out / "saucer.glb", printer=printer).codes
+
+
+def test_a_format_the_profile_lacks_is_written_with_a_warning(
+    design: Design, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert "stl" not in load_profile("bureau").accepted_formats
+    res = export_design(design, tmp_path / "s", printer="bureau", cup_diameter_mm=CUP_MM, formats=["obj", "stl"],
+                        options=FabOptions(texture_px=ATLAS, seat="ring"))
+    assert res.formats == ["obj", "stl"] and (res.out / "saucer.stl").is_file()
+    said = [w for w in res.warnings if "does not list" in w]
+    assert len(said) == 1 and said[0].startswith(
+        "bureau's profile does not list 'stl'; written anyway (check that the printer takes it"
+    ), said
+    assert json.loads(res.summary_json.read_text())["warnings"] == res.warnings
+    # the CLI says so too, and still refuses a format it does not know
+    folder = save_design(design, tmp_path / "design")
+    quick = ["--printer", "bureau", "--seat", "ring", "--texture-px", str(ATLAS), "--cup-diameter-mm", str(CUP_MM),
+             "--no-check", "--no-verify", "-q"]
+    assert main(["export", str(folder), "--formats", "stl", *quick, "-o", str(tmp_path / "c")]) == 0
+    assert "warning: bureau's profile does not list 'stl'; written anyway" in capsys.readouterr().out
+    assert (tmp_path / "c" / "saucer.stl").is_file()
+
+
+def test_an_unknown_format_is_still_refused(design: Design, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(ExportError, match=r"unknown export format 'fbx'; known: 3mf, obj, glb, ply, wrl, stl"):
+        export_design(design, tmp_path / "u", printer="j55", cup_diameter_mm=CUP_MM, formats=["glb", "fbx"],
+                      options=FabOptions(texture_px=ATLAS))
+    assert not (tmp_path / "u").exists()
+    folder = save_design(design, tmp_path / "design")
+    code = main(["export", str(folder), "--formats", "3mf,fbx", "--no-check", "--no-verify", "-q", "-o", str(tmp_path / "v")])
+    err = capsys.readouterr().err
+    assert code == 2 and "unknown export format 'fbx'" in err and "Traceback" not in err
+    assert not (tmp_path / "v").exists()

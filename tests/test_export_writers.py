@@ -159,11 +159,13 @@ def test_deterministic_zip_is_byte_stable() -> None:
 
 def test_normalize_formats() -> None:
     acc = ("3mf", "obj", "wrl")
-    assert registry.normalize_formats(["3MF", ".obj", "vrml", "3mf"], acc, "P") == ["3mf", "obj", "wrl"]
+    assert registry.normalize_formats(["3MF", ".obj", "vrml", "3mf"], acc, "P") == (["3mf", "obj", "wrl"], [])
     with pytest.raises(ExportError, match="unknown export format 'fbx'"):
         registry.normalize_formats(["fbx"], acc, "P")
-    with pytest.raises(ExportError, match="P does not accept 'glb'"):
-        registry.normalize_formats(["glb"], acc, "P")
+    # a known format the profile does not list is written, with one warning
+    fmts, warnings = registry.normalize_formats(["glb", "3mf", ".GLB"], acc, "P")
+    assert fmts == ["glb", "3mf"] and len(warnings) == 1
+    assert warnings[0].startswith("P's profile does not list 'glb'; written anyway (check that the printer takes it")
     with pytest.raises(ExportError, match="no export format"):
         registry.normalize_formats([], acc, "P")
 

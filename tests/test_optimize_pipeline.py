@@ -133,3 +133,164 @@ def test_an_unrelated_output_folder_or_file_is_never_replaced(tmp_path) -> None:
     run_design(req, tmp_path / "d", progress=lambda *a: None)
     run_design(req, tmp_path / "d", progress=lambda *a: None)
     assert (tmp_path / "d" / "design.json").is_file()
+
+
+# --------------------------------------------------------------------------- issue 14: the design command
+
+TINY = ["--resolution", "16", "--image-size", "48", "--max-iters", "5"]
+
+
+def _design_argv(out: Path, *extra: str) -> list[str]:
+    return ["design", "--direct", str(SAMPLES / "direct_heart.png"), "--reflected", str(SAMPLES / "reflected_star.png"),
+            *TINY, "-o", str(out), *extra]
+
+
+def test_cli_design_json_short_options_and_force(tmp_path, capsys) -> None:
+    out = tmp_path / "design"
+    assert main(_design_argv(out, "-q", "--json")) == 0
+    captured = capsys.readouterr()
+    d = json.loads(captured.out)  # one JSON object and nothing else on stdout
+    assert set(d) == {"design", "enhancement", "stages", "final", "verify"}
+    assert d["design"] == str(out)
+    assert d["enhancement"]["strategy"] == "subject"
+    assert d["verify"]["schema"] == "saucerfab.verify/1"  # the quick verify of a trial export
+    assert [s["name"] for s in d["stages"]] == ["bw_sigma_large", "bw_sigma_small", "sparse"]
+    for st in d["stages"]:
+        assert {"name", "iterations", "E_visual", "E_deform", "stop_reason", "seconds"} <= set(st)
+    assert d["final"]["E_visual_final"] > 0 and d["final"]["max_abs_height_change"] >= 0
+    assert "original pictures" in d["final"]["E_visual_final_against"]
+    assert "it " not in captured.err  # -q: no progress lines
+    # an existing design is not replaced without --force
+    before = (out / "design.json").read_bytes()
+    assert main(_design_argv(out)) == 2
+    err = capsys.readouterr().err
+    assert str(out) in err and "--force" in err
+    assert (out / "design.json").read_bytes() == before
+    # with --force it is; the text summary says what the final E_visual is measured against
+    assert main(_design_argv(out, "--force")) == 0
+    captured = capsys.readouterr()
+    assert "final E_visual" in captured.out and "against the original pictures" in captured.out
+    assert "it " in captured.err  # progress on stderr, not stdout
+    # --seed says what it seeds
+    with pytest.raises(SystemExit):
+        main(["design", "--help"])
+    usage = " ".join(capsys.readouterr().out.split())
+    assert "--seed SEED seed of the random parts of a built-in base shape" in usage
+
+
+def test_cli_design_refuses_a_weight_the_ablation_does_not_use(tmp_path, capsys) -> None:
+    out = tmp_path / "design"
+    for ablation, option in (("no_deform", "--lam"), ("sparse_only", "--w-large"), ("laplacian_bw", "--lam")):
+        assert main(_design_argv(out, "--ablation", ablation, option, "5")) == 2
+        err = capsys.readouterr().err
+        assert option in err and f"--ablation {ablation}" in err and "Traceback" not in err
+    assert not out.exists()
+    # which weights a setting uses comes from its stages
+    from saucerfab.optimize.stages import weights_used
+
+    assert weights_used("no_deform") == set()
+    assert weights_used("sparse_only") == {"lam"}
+    assert weights_used("laplacian") == {"w_large", "w_small"}
+    assert weights_used("full") == {"w_large", "w_small", "lam"}
+
+
+def test_interrupt_in_the_first_stage_says_nothing_finished(tmp_path) -> None:
+    from saucerfab.errors import Interrupted
+
+    req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png",
+                        resolution=16, image_size=48, max_iters=5)
+
+    def interrupt(stage, it, max_it, parts, elapsed):
+        raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted) as info:
+        run_design(req, tmp_path / "design", progress=interrupt, log_every_s=0.0)
+    msg = str(info.value)
+    assert "last finished stage" not in msg
+    assert "no stage had finished yet" in msg and "start" in msg
+
+
+def test_resumed_design_counts_the_earlier_run_and_says_so(tmp_path, capsys, monkeypatch) -> None:
+    from saucerfab.optimize import pipeline
+
+    def interrupt_second(stage, it, max_it, parts, elapsed):
+        if stage == "bw_sigma_small":
+            raise KeyboardInterrupt
+
+    out = tmp_path / "design"
+    monkeypatch.setattr(pipeline, "_print_progress", interrupt_second)
+    assert main(_design_argv(out)) == 130
+    err = capsys.readouterr().err
+    assert "bw_sigma_large" in err and "last to finish" in err
+    monkeypatch.undo()
+    assert main(_design_argv(out)) == 0
+    captured = capsys.readouterr()
+    m = json.loads((out / "design.json").read_text())["metrics"]
+    assert m["resumed_after_stage"] == 1
+    assert m["total_s"] > m["this_run_s"] > 0  # the earlier run's finished stage counts
+    assert "resumed after stage 1" in captured.out and "this run" in captured.out
+
+
+# --------------------------------------------------------------------------- enhancement and frames (issue 14)
+
+TINY_REQ = {"resolution": 16, "image_size": 48, "max_iters": 3}
+
+
+def _used(folder: Path) -> tuple[dict, list[str]]:
+    params = json.loads((folder / "design.json").read_text())["parameters"]
+    return params["enhancement_used"], [s["name"] for s in params["stages"]]
+
+
+def test_photographs_without_a_subject_are_designed_without_enhancement(tmp_path) -> None:  # noqa: ANN001
+    req = DesignRequest(SAMPLES / "photos" / "chelsea.png", SAMPLES / "photos" / "coffee.png", **TINY_REQ)
+    out = run_design(req, tmp_path / "d", progress=lambda *a: None)
+    used, stages = _used(out)
+    assert used["asked"] == "auto" and used["strategy"] == "none"
+    assert "'chelsea.png'" in used["why"] and str(SAMPLES) not in used["why"]  # the file's name, not a path
+    assert stages == ["plain_sigma_large", "plain_sigma_small", "sparse"]
+    # the paper's enhancement, asked for, still needs a subject
+    with pytest.raises(ImageError, match="no foreground"):
+        run_design(DesignRequest(SAMPLES / "photos" / "chelsea.png", SAMPLES / "photos" / "coffee.png",
+                                 enhancement="subject", **TINY_REQ), tmp_path / "e", progress=lambda *a: None)
+
+
+def test_a_photo_with_a_threshold_mask_but_no_plain_background_is_not_enhanced(tmp_path) -> None:  # noqa: ANN001
+    from saucerfab import images as im
+
+    rocket = im.prepare_image(SAMPLES / "photos" / "rocket.jpg", 96)
+    heart = im.prepare_image(SAMPLES / "direct_heart.png", 96)
+    assert rocket.mask_source == "threshold" and im.plain_background_share(rocket) < im.PLAIN_SHARE
+    assert im.plain_background_share(heart) > 0.95
+    req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "photos" / "rocket.jpg", **TINY_REQ)
+    used, _ = _used(run_design(req, tmp_path / "d", progress=lambda *a: None))
+    assert used["strategy"] == "none" and "reflected picture 'rocket.jpg': no plain background" in used["why"]
+
+
+def test_graphics_with_a_clear_subject_keep_the_papers_enhancement_and_none_is_honoured(tmp_path, capsys) -> None:  # noqa: ANN001
+    args = ["design", "--direct", str(SAMPLES / "direct_heart.png"), "--reflected", str(SAMPLES / "reflected_star.png"),
+            "--resolution", "16", "--image-size", "48", "--max-iters", "3", "-q"]
+    assert main([*args, "-o", str(tmp_path / "a")]) == 0
+    assert "black-white enhancement: every picture has a clear subject" in capsys.readouterr().out
+    used, stages = _used(tmp_path / "a")
+    assert used["strategy"] == "subject" and stages[0] == "bw_sigma_large"
+    assert main([*args, "-o", str(tmp_path / "b"), "--enhancement", "none"]) == 0
+    used, stages = _used(tmp_path / "b")
+    assert used == {"asked": "none", "strategy": "none", "why": "--enhancement none was asked for"}
+    assert stages[0] == "plain_sigma_large"
+
+
+def test_enhancement_with_another_ablation_is_refused(capsys) -> None:  # noqa: ANN001
+    rc = main(["design", "--direct", str(SAMPLES / "direct_heart.png"), "--reflected", str(SAMPLES / "reflected_star.png"),
+               "--enhancement", "none", "--ablation", "laplacian", "-o", "/nonexistent/x"])
+    assert rc == 2 and "--ablation laplacian fixes its own" in capsys.readouterr().err
+
+
+def test_the_default_frames_show_each_whole_picture(tmp_path) -> None:  # noqa: ANN001
+    from saucerfab.scene import paper_scene
+
+    assert DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png").frames == "contain"
+    out = run_design(DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", **TINY_REQ),
+                     tmp_path / "d", progress=lambda *a: None)
+    scene = load_design(out).scene
+    assert scene.direct != paper_scene().direct  # re-aimed at the saucer
+    assert scene.camera == paper_scene().camera  # from the same eye

@@ -182,6 +182,32 @@ def test_energy_plot_negative_energies_and_missing_time():
         energy_plot([])
 
 
+def test_energy_plot_stage_labels_do_not_overlap(monkeypatch):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from saucerfab import report
+
+    # three short stages: they start a few pixels apart on a long run's time axis
+    rows = [{"stage": s, "iteration": i, "time_s": t0 + 0.01 * i, "E_visual": 100.0 - i, "E_total": 120.0 - i}
+            for s, t0 in (("bw_sigma_large", 0.0), ("bw_sigma_small", 0.03), ("sparse", 0.06)) for i in range(3)]
+    rows.append({"stage": "sparse", "iteration": 3, "time_s": 5.0, "E_visual": 90.0, "E_total": 110.0})
+    figs = []
+    real = report._figure_png
+    monkeypatch.setattr(report, "_figure_png", lambda fig: figs.append(fig) or real(fig))
+    assert decode_png(energy_plot(rows)).ndim == 3
+    (fig,) = figs
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    labels = [t for ax in fig.axes for t in ax.texts]
+    assert [t.get_text() for t in labels] == ["bw_sigma_large", "bw_sigma_small", "sparse"]
+    boxes = [t.get_window_extent(renderer) for t in labels]
+    for i in range(len(boxes)):
+        for j in range(i + 1, len(boxes)):
+            assert not boxes[i].overlaps(boxes[j]), (labels[i].get_text(), labels[j].get_text())
+    # and they stay inside the plot
+    ax_box = fig.axes[0].get_window_extent(renderer)
+    assert all(ax_box.y0 <= b.y0 and b.y1 <= ax_box.y1 for b in boxes)
+
+
 def test_elapsed_chains_per_stage_clocks():
     x = _elapsed(_log(per_stage_clock=True))
     assert (np.diff(x) >= 0).all()

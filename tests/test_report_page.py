@@ -44,9 +44,11 @@ def test_design_folder_has_a_self_contained_report(folders):
     html = (design / "report.html").read_text(encoding="utf-8")
     _no_network(html)
     for words in ("Inputs, masks and enhanced targets", "Energies and stages", "Height change",
-                  "where to stand", "In 3D", "bw_sigma_large"):
+                  "where to stand", "In 3D", "bw_sigma_large", "A trial export of this design"):
         assert words in html, words
-    assert html.count("data:image/png;base64,") >= 8
+    assert html.count("data:image/png;base64,") >= 14  # previews, references and the six verify pictures
+    ver = json.loads((design / "verify" / "verify.json").read_text())
+    assert ver["printer"] == "j55" and len(ver["files"][0]["views"]) == 6
 
 
 def test_export_writes_checks_verify_and_report(folders, capsys):

@@ -156,6 +156,19 @@ def test_psnr_ssim_and_shift_follow_their_definitions():
     assert sh.psnr_db == PSNR_CAP_DB
 
 
+def test_the_fft_shift_search_equals_the_one_shift_at_a_time_reference():
+    from saucerfab.verify.metrics import mse_grid, mse_grid_reference
+
+    rng = np.random.default_rng(3)
+    for trial in range(3):
+        a = rng.random((30, 34, 3))
+        ref = rng.random((30, 34, 3))
+        region = rng.random((30, 34)) > 0.3 * trial
+        fast, slow = mse_grid(a, ref, region, 6), mse_grid_reference(a, ref, region, 6)
+        assert np.array_equal(np.isinf(fast), np.isinf(slow))
+        assert np.allclose(fast[np.isfinite(fast)], slow[np.isfinite(slow)], rtol=1e-9, atol=1e-12)
+
+
 def test_eye_specs_parse_and_refuse_bad_values():
     assert parse_eyes("design").mode == "design"
     assert parse_eyes("BOTH", 60).ipd_mm == 60
@@ -261,3 +274,33 @@ def test_not_a_folder_and_bad_options_are_exit_2(tmp_path, capsys):
     assert "--eyes" in capsys.readouterr().err
     assert main(["verify", str(tmp_path), "--res", "3", "-q"]) == 2
     assert main(["verify", "-q"]) == 2
+
+
+def test_a_zipped_obj_is_verified_like_the_plain_one(flat_print, tmp_path):
+    from saucerfab.fabricate.options import FabOptions
+
+    folder, design = flat_print
+    out = tmp_path / "zipped"
+    export_design(design, out, printer="bureau", formats=["obj"], cup_diameter_mm=80, options=FabOptions(obj_zip=True))
+    assert not list(out.glob("*.obj")) and list(out.glob("*.zip"))
+    zipped = verify_print(out, eyes=EyeSpec("design"), res=48, spp=4)
+    plain = verify_print(folder, eyes=EyeSpec("design"), res=48, spp=4, all_formats=False)
+    assert zipped.files[0].format == "zip"
+    for view in ("direct", "reflected"):
+        assert abs(zipped.score(view).psnr_db - plain.score(view).psnr_db) < 0.3
+
+
+def test_a_two_reflection_print_is_verified_in_all_three_views(tmp_path):
+    from saucerfab.scene import parse_cup_spec
+
+    d = _flat_design()
+    moon = np.round(_picture("reflected2_moon.png", 256) * 255).astype(np.uint8)
+    scene = replace(d.scene, cup=parse_cup_spec("prism:6"), reflected2=d.scene.reflected)
+    d = replace(d, scene=scene, references={**d.references, "reflected2": moon})
+    out = tmp_path / "prism2"
+    export_design(d, out, printer="bureau", formats=["obj"], cup_diameter_mm=80)
+    assert (out / "reference_reflected2.png").is_file()
+    assert "reflected2" in json.loads((out / "scene.json").read_text())["views"]
+    result = verify_print(out, eyes=EyeSpec("design"), res=48, spp=4)
+    assert [v.view for v in result.files[0].views] == ["direct", "reflected", "reflected2"]
+    assert result.score("reflected2").coverage > 0.05

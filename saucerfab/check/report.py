@@ -382,43 +382,128 @@ def _fmt_num(v: Any, fmt: str) -> str:
     return "-" if v is None else format(v, fmt)
 
 
+#: the table's columns: header, justification
+_TABLE_COLUMNS = (
+    ("file", "left"), ("format", "left"), ("verdict", "left"), ("triangles", "right"),
+    ("size mm", "right"), ("volume cm3", "right"), ("min wall mm", "right"), ("E/W", "right"),
+)
+
+
+def _file_name(path: str) -> str:
+    return re.split(r"[/\\]", path)[-1]
+
+
+def shorten_middle(path: str, width: int, ellipsis: str = "\u2026") -> str:
+    """``path`` in ``width`` characters, cut in the middle: the file name stays whole.
+
+    ``tmp/some/deep/folder/runs/e1/saucer.3mf`` at 24 is ``tmp/some/de…1/saucer.3mf``.
+    Where ``width`` cannot hold ``…/`` and the name, the result is that, longer.
+    """
+    if len(path) <= width:
+        return path
+    name = _file_name(path)
+    keep = max(width - len(ellipsis), 0)
+    tail = min(len(path), max(len(name) + 1, keep - keep // 2))  # the name and the separator before it
+    head = max(keep - tail, 0)
+    return path[:head] + ellipsis + path[len(path) - tail :]
+
+
+def _table_widths(rows: Sequence[Sequence[str]], total: int, ellipsis: str) -> list[int] | None:
+    """Widths of the table's columns (without padding) so it fits ``total`` characters.
+
+    No cell is ever cut but the file's, which shortens its middle
+    (:func:`shorten_middle`) down to ``…/name``; headers may wrap at their
+    spaces. None when even that does not fit: then one line per file.
+    """
+    heads = [h for h, _ in _TABLE_COLUMNS]
+    cols = list(zip(*rows)) if rows else [() for _ in heads]
+    cell = [max((len(c) for c in col), default=0) for col in cols]
+    natural = [max(len(h), c) for h, c in zip(heads, cell)]
+    least = [max(max(len(w) for w in h.split()), c) for h, c in zip(heads, cell)]
+    least[0] = max([len(heads[0])] + [min(len(p), len(_file_name(p)) + 1 + len(ellipsis)) for p in cols[0]])
+    avail = total - (3 * len(heads) + 1)  # a space either side of each cell, the rules between and at the edges
+    if sum(natural) <= avail:
+        return natural
+    widths = [natural[0], *least[1:]]
+    spare = avail - sum(widths)
+    if spare < 0:  # the file column gives way, down to its least
+        widths[0] = avail - sum(least[1:])
+        return widths if widths[0] >= least[0] else None
+    for i in sorted(range(1, len(heads)), key=lambda i: natural[i] - least[i]):  # unwrap what is cheapest first
+        grow = min(natural[i] - least[i], spare)
+        widths[i] += grow
+        spare -= grow
+    return widths
+
+
+def _table_cells(r: Report) -> list[str]:
+    s = r.stats
+    vol = s.get("volume_mm3")
+    return [
+        r.path,
+        r.format or "?",
+        r.verdict,
+        _fmt_num(s.get("triangles"), ","),
+        _fmt_size(s),
+        "-" if vol is None else f"{vol / 1000:.4g}",
+        _fmt_num(s.get("min_wall_mm"), ".3g"),
+        f"{len(r.errors)}/{len(r.warnings)}",
+    ]
+
+
+def _file_line(r: Report, cells: Sequence[str], verdict_style: str) -> Any:
+    """The narrow form of a table row: ``path  format  verdict  triangles  size  min-wall  E/W``."""
+    from rich.text import Text
+
+    _, fmt, verdict, tris, size, _, wall, ew = cells
+    parts: list[Any] = [r.path, "  ", fmt, "  ", (verdict, verdict_style)]
+    for text, shown in ((f"{tris} triangles", tris), (f"{size} mm", size), (f"min wall {wall} mm", wall)):
+        if shown != "-":
+            parts += ["  ", text]
+    parts += ["  ", f"E/W {ew}"]
+    return Text.assemble(*parts)
+
+
 def render_table(reports: Sequence[Report], *, console: Any = None) -> None:
     """Print the human summary: one row per file, then each file's findings.
 
-    Uses rich (imported here, so JSON-only runs never load it).
+    The table fits the console's width (``COLUMNS``): a long path loses its
+    middle, never its file name; no other cell is cut. Where it cannot fit,
+    each file gets one line instead. Uses rich (imported here, so JSON-only
+    runs never load it).
     """
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
+    from rich.text import Text
 
     con = console or Console(highlight=False, soft_wrap=False)
-    table = Table(title="saucerfab check", show_lines=False)
-    for col, just in (
-        ("file", "left"), ("format", "left"), ("verdict", "left"), ("triangles", "right"),
-        ("size mm", "right"), ("volume cm3", "right"), ("min wall mm", "right"), ("E/W", "right"),
-    ):
-        table.add_column(col, justify=just)  # type: ignore[arg-type]
     style = {"printable": "green", "not printable": "red", "unreadable": "magenta"}
-    for r in reports:
-        s = r.stats
-        vol = s.get("volume_mm3")
-        table.add_row(
-            escape(r.path),
-            r.format or "?",
-            f"[{style[r.verdict]}]{r.verdict}[/]",
-            _fmt_num(s.get("triangles"), ","),
-            _fmt_size(s),
-            "-" if vol is None else f"{vol / 1000:.4g}",
-            _fmt_num(s.get("min_wall_mm"), ".3g"),
-            f"{len(r.errors)}/{len(r.warnings)}",
-        )
-    con.print(table)
+    ellipsis = "\u2026" if "utf" in (con.encoding or "").lower() else "..."
+    rows = [_table_cells(r) for r in reports]
+    widths = _table_widths(rows, con.width, ellipsis)
+    if widths is None:
+        con.print(Text("saucerfab check", style="italic"))
+        for r, cells in zip(reports, rows):
+            con.print(_file_line(r, cells, style[r.verdict]), soft_wrap=True)
+    else:
+        table = Table(title="saucerfab check", show_lines=False, padding=(0, 1), show_edge=True)
+        for (col, just), width in zip(_TABLE_COLUMNS, widths):
+            table.add_column(col, justify=just, width=width)  # type: ignore[arg-type]
+        for r, cells in zip(reports, rows):
+            table.add_row(
+                Text(shorten_middle(r.path, widths[0], ellipsis)),
+                cells[1],
+                Text(r.verdict, style=style[r.verdict]),
+                *cells[3:],
+            )
+        con.print(table)
     sev_style = {"error": "red", "warning": "yellow", "info": "dim"}
     for r in reports:
         shown = [f for f in r.findings if f.severity != "info" or r.verdict == "unreadable"]
         if not shown:
             continue
-        con.print(f"[bold]{escape(r.path)}[/]  {r.verdict}")
+        con.print(Text.assemble((r.path, "bold"), "  ", r.verdict), soft_wrap=True)  # the path whole
         for f in shown:
             at = ""
             if f.where and f.where.get("point_mm") is not None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -86,19 +87,56 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _stdout_reader_gone() -> bool:
+    """Whether stdout is a pipe whose reader has closed it (``saucerfab ... | head -1``)."""
+    try:
+        import select
+
+        poller = select.poll()  # not on Windows: there the error is reported as usual
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+    except (AttributeError, OSError, ValueError):  # no poll, or stdout is not a file (captured)
+        return False
+    return any(events & select.POLLERR for _, events in poller.poll(0))
+
+
+def _stdout_to_devnull() -> None:
+    """Point stdout's descriptor at devnull, so the flush at exit cannot fail again.
+
+    The recipe of Python's ``signal`` documentation (note on SIGPIPE).
+    """
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI with ``argv`` (default: ``sys.argv[1:]``); return the exit code."""
     parser = build_parser()
-    args = parser.parse_args(list(argv) if argv is not None else None)
+    try:
+        args = parser.parse_args(list(argv) if argv is not None else None)
+    except BrokenPipeError:  # --version into a closed pipe (argparse guards its help itself)
+        if not _stdout_reader_gone():
+            raise
+        _stdout_to_devnull()
+        return 0
     if not getattr(args, "_run", None):
         parser.print_help()
         return 0
+    code: int | None = None
     try:
-        return int(args._run(args))
+        code = int(args._run(args))
+        sys.stdout.flush()  # a reader that has gone shows here, not at exit
+        return code
     except SaucerfabError as exc:
         print(f"saucerfab {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except OSError as exc:  # a bad output path, a full disk, no permission
+        if isinstance(exc, BrokenPipeError) and _stdout_reader_gone():  # `| head -1`: quietly
+            _stdout_to_devnull()
+            return 0 if code is None else code
         where = f" ({exc.filename})" if getattr(exc, "filename", None) else ""
         print(f"saucerfab {args.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)
         return 2

@@ -81,12 +81,22 @@ def run(args: argparse.Namespace) -> int:
             write_text_atomic(args.junit, reports_to_junit(reports))
         except OSError as exc:
             raise ConfigError(f"cannot write --junit {args.junit!r}: {exc.strerror or exc}") from None
-    if args.json:
-        sys.stdout.write(reports_to_json(reports) + "\n")
-        print(summary_line(reports), file=sys.stderr)
-    else:
-        from saucerfab.check.report import render_table
+    code = max(r.exit_code for r in reports)
+    try:
+        if args.json:
+            sys.stdout.write(reports_to_json(reports) + "\n")
+            print(summary_line(reports), file=sys.stderr)
+        else:
+            from saucerfab.check.report import render_table
 
-        render_table(reports)
-        print(summary_line(reports))
-    return max(r.exit_code for r in reports)
+            render_table(reports)
+            print(summary_line(reports))
+        sys.stdout.flush()
+    except BrokenPipeError:
+        # `check ... | head`: the reader has all it wanted; the verdict still decides the exit code
+        from saucerfab.cli import _stdout_reader_gone, _stdout_to_devnull
+
+        if not _stdout_reader_gone():
+            raise
+        _stdout_to_devnull()
+    return code

@@ -15,10 +15,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--height-scale", type=float, default=0.1, help="model units per unit of a shape file")
     p.add_argument("--scene", default="paper", help="scene TOML or preset (default: paper)")
     p.add_argument("--cup", help="cup override: circle[:R], ellipse:A,B[,ROT], prism:N[,R[,ROT]]")
-    p.add_argument("--out", required=True, help="design folder to write")
+    p.add_argument("-o", "--out", required=True, help="design folder to write (an existing design needs --force)")
+    p.add_argument("--force", action="store_true", help="replace the design already in --out")
     p.add_argument("--resolution", type=int, help="heightfield vertices per side (default 150)")
     p.add_argument("--image-size", type=int, help="rendered image size in pixels (default 512)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the random parts of a built-in base shape (default 0; a shape file has none)",
+    )
     p.add_argument("--direct-mask", help="foreground mask for the direct image (white = foreground)")
     p.add_argument("--reflected-mask", help="foreground mask for the reflected image")
     p.add_argument("--reflected2-mask", help="foreground mask for the second reflected image")
@@ -40,10 +46,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--frames",
-        default="scene",
-        choices=["scene", "contain", "cover"],
-        help="view frames: the scene's (paper preset), or fitted so each image lands on the saucer (contain) "
-        "or the saucer fills each frame (cover)",
+        default=None,
+        choices=["contain", "cover", "scene"],
+        help="view frames: fitted so each whole image lands on the saucer or its reflection (contain, the "
+        "default), or so the saucer fills each frame (cover), or the scene's own frames (scene: the paper's "
+        "preset, which puts part of each image off the saucer)",
     )
     p.add_argument(
         "--prism-placement",
@@ -62,13 +69,75 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="leave wall-clock times out of the design folder (byte-identical reruns)",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument(
+        "--enhancement",
+        default=None,
+        choices=["auto", "subject", "none"],
+        help="conflict reduction of the full method: the paper's black-white enhancement (subject), none (the "
+        "pictures as they are), or auto (the default: subject when every picture has a clear subject - an alpha "
+        "channel, a mask file, or a subject on a plain background - else none, as for full-bleed photos)",
+    )
+    p.add_argument("--json", action="store_true", help="print the result as JSON on stdout (progress stays on stderr)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    p.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="skip the quick verify of a trial export (J55, the scene's cup) that shows in the design's report.html",
+    )
+
+
+#: weight option -> the StageSpec.weight it sets
+WEIGHT_OPTIONS = {"--w-large": "w_large", "--w-small": "w_small", "--lam": "lam"}
+
+
+def check_weights(args: argparse.Namespace) -> None:
+    """Refuse a weight option that no stage of the chosen ablation uses (it would be ignored)."""
+    from saucerfab.errors import ConfigError
+    from saucerfab.optimize.stages import ABLATION_STAGES, weights_used
+
+    used = weights_used(args.ablation)
+    for option, key in WEIGHT_OPTIONS.items():
+        if getattr(args, key) is None or key in used:
+            continue
+        takers = ", ".join(a for a in ABLATION_STAGES if key in weights_used(a))
+        uses = ", ".join(o for o, k in WEIGHT_OPTIONS.items() if k in used) or "no weight option"
+        raise ConfigError(
+            f"{option} is not used by --ablation {args.ablation} (its stages use {uses}); "
+            f"drop {option}, or choose an --ablation that uses it ({takers})"
+        )
+
+
+def _json_summary(out: object, meta: dict) -> dict:
+    """What --json prints: the folder, the per-stage metrics and the final metrics."""
+    m = meta["metrics"]
+    stages = []
+    for st in m.get("stages", []):
+        row = {k: st.get(k) for k in ("name", "iterations", "E_visual", "E_deform", "stop_reason")}
+        if "seconds" in st:
+            row["seconds"] = st["seconds"]
+        stages.append(row)
+    return {
+        "design": str(out),
+        "enhancement": meta.get("parameters", {}).get("enhancement_used"),
+        "stages": stages,
+        "final": {
+            "E_visual_final": m.get("E_visual_final"),
+            "E_visual_final_against": "the original pictures (hard renders of the textured result), "
+            "not the stages' blur-matched (often enhanced) targets",
+            "max_abs_height_change": m.get("max_abs_height_change"),
+        },
+    }
 
 
 def run(args: argparse.Namespace) -> int:
-    from saucerfab.optimize.pipeline import run_design
+    from pathlib import Path
+
+    from saucerfab.optimize.pipeline import check_output_folder, run_design
     from saucerfab.optimize.request import DesignRequest
 
+    check_weights(args)
+    # the library replaces an earlier design folder (batch reruns); the command asks for --force
+    check_output_folder(Path(args.out), force=args.force)
     req = DesignRequest(
         direct=args.direct,
         reflected=args.reflected,
@@ -89,7 +158,8 @@ def run(args: argparse.Namespace) -> int:
         max_iters=args.max_iters,
         barrier_weight=args.barrier_weight,
         ablation=args.ablation,
-        frames=args.frames,
+        **({"frames": args.frames} if args.frames is not None else {}),
+        **({"enhancement": args.enhancement} if args.enhancement is not None else {}),
         prism_placement=args.prism_placement,
         color_init=args.color_init,
         record_times=not args.no_times,
@@ -100,16 +170,57 @@ def run(args: argparse.Namespace) -> int:
 
     meta = json.loads((out / "design.json").read_text())
     m = meta["metrics"]
+    verified = None if args.no_verify else _verify(out, args)
+    if args.json:
+        doc = _json_summary(out, meta)
+        doc["verify"] = verified.to_dict(record_times=not args.no_times) if verified is not None else None
+        print(json.dumps(doc, indent=2))
+        return 0
     print(f"wrote {out}")
+    enh = meta.get("parameters", {}).get("enhancement_used") or {}
+    if enh.get("strategy") in ("subject", "none"):
+        what = "black-white enhancement" if enh["strategy"] == "subject" else "no enhancement (the pictures as they are)"
+        print(f"  {what}: {enh.get('why', '')}")
     for st in m.get("stages", []):
         print(
             f"  {st['name']:22s} {st['iterations']:4d} it  {st.get('seconds', float('nan')):6.1f} s  "
             f"E_visual {st['E_visual']:10.1f}  E_deform {st['E_deform']:.4f}  "
             f"conflict {100 * st['conflict_fraction']:.1f}%"
         )
+    total = f"total {m.get('total_s', float('nan')):.1f} s"
+    if "resumed_after_stage" in m:
+        total += (
+            f" over all runs (this run {m.get('this_run_s', float('nan')):.1f} s, "
+            f"resumed after stage {m['resumed_after_stage']})"
+        )
     print(
-        f"  final E_visual {m.get('E_visual_final', float('nan')):.1f}, max |h - z| "
-        f"{m['max_abs_height_change']:.4f} (delta {meta['scene']['saucer']['delta']}), total {m.get('total_s', float('nan')):.1f} s"
+        f"  final E_visual {m.get('E_visual_final', float('nan')):.1f} against the original pictures "
+        "(the stages' E_visual is against their blur-matched, often enhanced, targets), max |h - z| "
+        f"{m['max_abs_height_change']:.4f} (delta {meta['scene']['saucer']['delta']}), {total}"
     )
-    print(f"  previews: {out / 'previews'}")
+    if verified is not None:
+        print(f"  verified a trial export (J55, OBJ) at {verified.res} px:")
+        for v in verified.files[0].views:
+            psnr = "  -- " if v.psnr_db != v.psnr_db else f"{v.psnr_db:4.1f}"
+            print(f"    {v.view:10s} from the {v.eye:6s} eye  {psnr} dB, {v.coverage * 100:3.0f}% of the frame"
+                  f"{'' if v.passed else '  LOW'}")
+    print(f"  previews: {out / 'previews'}; report: {out / 'report.html'}")
     return 0
+
+
+def _verify(out, args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    """The quick verify of a trial export, or None (with a note on stderr) when it cannot be made."""
+    import sys
+
+    from saucerfab.errors import SaucerfabError
+    from saucerfab.finish import verify_design
+
+    def progress(msg: str, fraction: float) -> None:
+        if not args.quiet:
+            print(f"[verify {fraction * 100:5.1f}%] {msg}", file=sys.stderr, flush=True)
+
+    try:
+        return verify_design(out, record_times=not args.no_times, progress=progress)
+    except SaucerfabError as exc:  # the design itself is complete; say why it was not verified
+        print(f"  note: the design is not verified: {exc}", file=sys.stderr)
+        return None

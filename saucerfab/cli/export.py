@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 HELP = "turn a design into print-ready files (3MF, OBJ, GLB, PLY, VRML) with scene.json"
 
@@ -30,7 +31,8 @@ def _rgb(text: str) -> tuple[int, int, int]:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("design", help="the design folder (from 'saucerfab design')")
-    p.add_argument("-o", "--out", required=True, help="output folder (new, empty, or a previous export)")
+    p.add_argument("-o", "--out", required=True, help="output folder (new, empty, or a previous export of this design)")
+    p.add_argument("--force", action="store_true", help="replace an earlier export of another design in --out")
     p.add_argument("--printer", default="j55", help="printer profile key or .toml path (default j55; see 'saucerfab printers')")
     p.add_argument(
         "--cup-diameter-mm",
@@ -48,8 +50,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("solid and cup seat (millimetres)")
     g.add_argument("--base-mm", type=float, default=3.0, help="plate thickness under the cup's standing plane (default 3)")
     g.add_argument("--min-thickness-mm", type=float, default=2.0, help="material under the saucer's lowest point (default 2)")
-    g.add_argument("--seat", choices=("recess", "ring", "none"), default="recess", help="cup seat kind (default recess)")
-    g.add_argument("--no-seat", action="store_const", const="none", dest="seat", help="same as --seat none")
+    # default None: "not given", so run can refuse --no-seat with an explicit --seat recess/ring
+    g.add_argument("--seat", choices=("recess", "ring", "none"), default=None, help="cup seat kind (default recess)")
+    g.add_argument("--no-seat", action="store_true", help="same as --seat none")
     g.add_argument("--seat-depth-mm", type=float, default=1.5, help="recess depth or ring height (default 1.5)")
     g.add_argument("--seat-clearance-mm", type=float, default=0.5, help="gap around the cup's footprint (default 0.5)")
     g.add_argument("--seat-rim-mm", type=float, default=4.0, help="plate width around the recess (default 4)")
@@ -72,15 +75,70 @@ def _size(n: int) -> str:
     return f"{n} B"
 
 
+def _seat(args: argparse.Namespace) -> str:
+    """The seat kind from --seat and --no-seat; refuses the two contradicting each other."""
+    from saucerfab.errors import ConfigError
+
+    if args.no_seat and args.seat not in (None, "none"):
+        raise ConfigError(
+            f"--no-seat and --seat {args.seat} contradict each other; give --seat {args.seat} "
+            "for a seat, or --no-seat (same as --seat none) for none, not both"
+        )
+    return "none" if args.no_seat else (args.seat or "recess")
+
+
+def _design_inputs(folder: Path) -> object:
+    """The inputs recorded in a design folder's design.json, or None when it cannot be read."""
+    try:
+        return json.loads((folder / "design.json").read_text(encoding="utf-8")).get("inputs", {})
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def check_other_export(design: str, out: str, force: bool) -> None:
+    """Refuse, unless ``force``, to replace ``out`` when it holds an export of another design.
+
+    Re-exporting the same design into its own folder stays allowed: the
+    earlier export's ``export.json`` -> ``design`` -> ``inputs`` equal the
+    design's inputs.
+    """
+    from saucerfab.errors import ConfigError
+
+    summary = Path(out) / "export.json"
+    if force or not summary.is_file():
+        return
+    ours = _design_inputs(Path(design))
+    if ours is None:
+        return  # not a readable design: export_design says what is wrong with it
+    try:
+        theirs = json.loads(summary.read_text(encoding="utf-8"))["design"]["inputs"]
+    except (OSError, ValueError, KeyError, TypeError):
+        theirs = None
+    # export.json was written with json.dumps(default=str): compare in that form
+    if theirs is not None and json.loads(json.dumps(ours, default=str)) == theirs:
+        return
+    if isinstance(theirs, dict):
+        files = ", ".join(f"{k} {v.get('file')}" for k, v in sorted(theirs.items()) if isinstance(v, dict) and v.get("file"))
+        what = f"an export of another design ({files or 'other inputs'})"
+    else:
+        what = "an export whose design cannot be read from its export.json"
+    raise ConfigError(
+        f"--out {str(out)!r} holds {what}; exporting {str(design)!r} there would remove its files. "
+        "Give another --out, or add --force to replace it"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     from saucerfab.fabricate.options import FabOptions
     from saucerfab.fabricate.pipeline import export_design
     from saucerfab.fabricate.profiles import load_profile
 
+    seat = _seat(args)
+    check_other_export(args.design, args.out, args.force)
     options = FabOptions(
         base_thickness_mm=args.base_mm,
         min_thickness_mm=args.min_thickness_mm,
-        seat=args.seat,
+        seat=seat,
         seat_depth_mm=args.seat_depth_mm,
         seat_clearance_mm=args.seat_clearance_mm,
         seat_rim_mm=args.seat_rim_mm,

@@ -158,7 +158,8 @@ def export_design(
     Raises:
         DesignError: missing or broken design folder.
         ConfigError: bad cup diameter or options, unknown printer.
-        ExportError: unknown or unaccepted format, part larger than the
+        ExportError: unknown format (one the profile does not list is written
+            with a warning), part larger than the
             build volume, over the printer's triangle or file size limit,
             unusable output folder.
         MeshError: the solid cannot be built, or is too thin for a
@@ -183,8 +184,9 @@ def export_design(
     profile = printer if isinstance(printer, PrinterProfile) else load_profile(printer)
     if isinstance(formats, str):  # "3mf,obj" from a config file or a careless caller
         formats = formats.split(",")
-    fmts = registry.normalize_formats(
-        [profile.preferred_format] if formats is None else list(formats), profile.accepted_formats, profile.name
+    # a format the profile does not list is written with a warning (a GLB to share a preview, say)
+    fmts, format_warnings = registry.normalize_formats(
+        [profile.preferred_format] if formats is None else list(formats), profile.accepted_formats, profile.key
     )
     if opts.texture_px is not None and opts.texture_px > profile.max_texture_px:
         raise ExportError(
@@ -274,7 +276,7 @@ def export_design(
         "unseen_fraction": round(bake_stats["unseen_fraction"], 6),
         "seat": {"kind": solid.seat.kind, "floor_z_mm": round(solid.seat.floor_z, 6)},
         "options": opts.to_dict(),
-        "warnings": list(solid.warnings),
+        "warnings": [*format_warnings, *solid.warnings],
         "files": {
             name: {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
             for name, data in sorted(all_files.items())
@@ -301,6 +303,6 @@ def export_design(
         mm_per_unit=scene.mm_per_unit,
         file_bytes={name: len(data) for name, data in all_files.items()},
         unseen_fraction=bake_stats["unseen_fraction"],
-        warnings=list(solid.warnings),
+        warnings=[*format_warnings, *solid.warnings],
         timings=timings,
     )

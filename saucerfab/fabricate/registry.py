@@ -53,29 +53,41 @@ WRITERS: dict[str, Writer] = {
 }
 
 
-def normalize_formats(formats: Sequence[str], accepted: Sequence[str], printer_name: str) -> list[str]:
-    """Lower-cased, de-duplicated formats in the given order, each known and accepted.
+def normalize_formats(
+    formats: Sequence[str], accepted: Sequence[str], printer_name: str
+) -> tuple[list[str], list[str]]:
+    """Lower-cased, de-duplicated formats in the given order, each known; and warnings.
+
+    A known format that ``accepted`` (the printer profile's list) lacks is
+    kept, with a warning: the designer may want it for something else (a GLB
+    to share a preview), and the profile may be behind the printer's software.
+
+    Returns:
+        ``(formats, warnings)``: the formats to write, and one line per
+        format the profile does not list.
 
     Raises:
-        ExportError: an unknown format, or one the printer does not accept.
+        ExportError: an unknown format, or none given.
     """
     out: list[str] = []
+    warnings: list[str] = []
     for f in formats:
         key = str(f).strip().lower().lstrip(".")
         if key == "vrml":
             key = "wrl"
         if key not in WRITERS:
             raise ExportError(f"unknown export format {f!r}; known: {', '.join(WRITERS)}")
+        if key in out:
+            continue
+        out.append(key)
         if key not in accepted:
-            raise ExportError(
-                f"{printer_name} does not accept {key!r}; it accepts {', '.join(accepted)} "
-                "(see 'saucerfab printers')"
+            warnings.append(
+                f"{printer_name}'s profile does not list {key!r}; written anyway "
+                f"(check that the printer takes it; the profile lists {', '.join(accepted)})"
             )
-        if key not in out:
-            out.append(key)
     if not out:
         raise ExportError("no export format given; name at least one, e.g. --formats 3mf")
-    return out
+    return out, warnings
 
 
 def render(mesh: TexturedMesh, fmt: str, options: FabOptions) -> dict[str, bytes]:

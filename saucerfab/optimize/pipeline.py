@@ -29,10 +29,10 @@ import numpy as np
 
 from saucerfab import __version__
 from saucerfab.design import Design, save_design, sha256_file
-from saucerfab.errors import ConfigError, Interrupted
+from saucerfab.errors import ConfigError, Interrupted, MaskError
 from saucerfab.fileio import write_bytes_atomic
 from saucerfab.optimize.request import DesignRequest
-from saucerfab.optimize.stages import ABLATION_STAGES, SIGMA_LARGE, WEIGHT_FACTORS, StageSpec
+from saucerfab.optimize.stages import ABLATION_STAGES, SIGMA_LARGE, WEIGHT_FACTORS, StageSpec, without_enhancement
 from saucerfab.scene import Scene, load_scene, parse_cup_spec
 
 #: progress(stage, iteration, max_iterations, parts, elapsed_s)
@@ -56,6 +56,8 @@ class Prepared:
         reflected_groups: prism facet groups in two-reflection mode, else None.
         placement: in two-reflection mode, the prism placement chosen and
             the region overlap of each option.
+        enhancement: the conflict reduction chosen: asked, strategy
+            (``subject``, ``none`` or ``ablation``) and why (:func:`choose_enhancement`).
     """
 
     scene: Scene
@@ -67,6 +69,7 @@ class Prepared:
     inputs: dict[str, Any]
     reflected_groups: list[list[int]] | None
     placement: dict[str, Any] | None = None
+    enhancement: dict[str, str] | None = None
 
 
 def build_scene(request: DesignRequest) -> Scene:
@@ -125,12 +128,31 @@ def prepare(request: DesignRequest) -> Prepared:
         "reflected2": request.reflected2_mask,
     }
     render, texture, masks, inputs = {}, {}, {}, {}
+    problems: list[str] = []
     for name in names:
         path = paths[name]
         if path is None:  # pragma: no cover - names only lists given images
             continue
         loaded = im.load_image(path)  # decoded once, fitted at two sizes
-        view = im.prepare_image(path, s, mask_path=mask_paths[name], loaded=loaded)
+        fname = Path(path).name
+        if request.enhancement == "none" and request.ablation == "full":
+            view = im.prepare_image(path, s, mask_method="none", loaded=loaded)
+        else:
+            try:
+                view = im.prepare_image(path, s, mask_path=mask_paths[name], loaded=loaded)
+            except MaskError as exc:
+                if request.enhancement == "subject" or request.ablation != "full":
+                    raise
+                # the reason without the machine's path to the file (design folders are reproducible)
+                why = str(exc).split(". Give")[0].replace(repr(str(path)), repr(fname))
+                problems.append(f"{name} picture: {why}")
+                view = im.prepare_image(path, s, mask_method="none", loaded=loaded)
+            else:
+                if view.mask_source == "threshold":
+                    plain = im.plain_background_share(view)
+                    if plain < im.PLAIN_SHARE:
+                        problems.append(f"{name} picture {fname!r}: no plain background around a subject "
+                                        f"({plain:.0%} of it is near its border colour)")
         render[name] = view.flattened()
         masks[name] = view.mask
         # the texture keeps more of the input's detail than the render size
@@ -145,21 +167,47 @@ def prepare(request: DesignRequest) -> Prepared:
         inputs["shape"] = {"file": Path(request.shape).name, "sha256": sha256_file(request.shape)}
     else:
         inputs["shape"] = {"builtin": request.shape}
-    if len(names) == 2:
+    enhancement = choose_enhancement(request, problems, {k: inputs[k]["mask_source"] for k in names})
+    if enhancement["strategy"] == "none":
+        enhanced = {k: v.copy() for k, v in render.items()}  # no enhanced targets: the pictures themselves
+    elif len(names) == 2:
         e_d, e_r = im.black_white_targets(masks["direct"], masks["reflected"])
         enhanced = {"direct": e_d, "reflected": e_r}
     else:
         e = im.solid_colour_targets([masks[k] for k in names])
         enhanced = dict(zip(names, e))
-    return Prepared(scene, base, render, texture, enhanced, masks, inputs, groups, placement or None)
+    return Prepared(scene, base, render, texture, enhanced, masks, inputs, groups, placement or None, enhancement)
 
 
-def check_output_folder(out: Path) -> None:
+def choose_enhancement(request: DesignRequest, problems: list[str], sources: dict[str, str]) -> dict[str, str]:
+    """Which conflict reduction the design uses, and why (recorded in design.json, printed by the CLI).
+
+    ``auto``: the paper's black-white enhancement (``subject``) when every
+    picture has a clear subject - an alpha channel, a mask file, or a subject
+    the automatic mask finds on a plain background - and the pictures as they
+    are (``none``, Figure 11 e) otherwise: a full-bleed photograph has no
+    subject to paint black or white, and forcing one prints one picture's
+    colours across the other. An ablation other than ``full`` keeps its own targets.
+    """
+    asked = request.enhancement
+    if request.ablation != "full":
+        return {"asked": asked, "strategy": "ablation", "why": f"--ablation {request.ablation} fixes the targets"}
+    if asked != "auto":
+        return {"asked": asked, "strategy": asked, "why": f"--enhancement {asked} was asked for"}
+    if problems:
+        return {"asked": asked, "strategy": "none", "why": "; ".join(problems)}
+    how = ", ".join(f"{k}: {v} mask" for k, v in sources.items())
+    return {"asked": asked, "strategy": "subject", "why": f"every picture has a clear subject ({how})"}
+
+
+def check_output_folder(out: Path, force: bool = True) -> None:
     """Refuse, before any work, an output path whose replacement would lose a user's data.
 
     The design folder is written atomically and replaces ``out`` when done;
     that is only safe when ``out`` does not exist, is an empty folder, or is
-    an earlier design folder (it holds ``design.json``).
+    an earlier design folder (it holds ``design.json``). With ``force``
+    False an earlier design folder is refused too (the CLI without
+    ``--force``); the library's default replaces it, as batch reruns need.
     """
     if not out.exists():
         return
@@ -169,6 +217,11 @@ def check_output_folder(out: Path) -> None:
         raise ConfigError(
             f"--out {str(out)!r} is a non-empty folder that is not a design folder; saucerfab would "
             "replace it. Give a new or empty folder, or remove it first"
+        )
+    if not force and (out / "design.json").is_file():
+        raise ConfigError(
+            f"--out {str(out)!r} already holds a design; writing this one would replace it. "
+            "Give a new folder, or add --force to replace it"
         )
 
 
@@ -202,11 +255,15 @@ class _Checkpoint:
                     "log": json.loads(str(z["log"])),
                     "metrics": json.loads(str(z["metrics"])),
                     "weights": json.loads(str(z["weights"])),
+                    # wall time of earlier runs up to the saved state (0 in older checkpoints)
+                    "elapsed_s": float(z["elapsed_s"]) if "elapsed_s" in z.files else 0.0,
                 }
         except (OSError, ValueError, KeyError):
             return None  # a damaged checkpoint is ignored; the run starts afresh
 
-    def save(self, stage: int, h: np.ndarray, c: np.ndarray, log: list, metrics: dict, weights: dict) -> None:
+    def save(
+        self, stage: int, h: np.ndarray, c: np.ndarray, log: list, metrics: dict, weights: dict, elapsed_s: float = 0.0
+    ) -> None:
         import io
 
         buf = io.BytesIO()
@@ -219,6 +276,7 @@ class _Checkpoint:
             log=np.array(json.dumps(log)),
             metrics=np.array(json.dumps(metrics)),
             weights=np.array(json.dumps(weights)),
+            elapsed_s=np.array(float(elapsed_s)),
         )
         write_bytes_atomic(self.dir / "state.npz", buf.getvalue())
 
@@ -281,6 +339,8 @@ def run_design(
     z = torch.as_tensor(base.reshape(-1), dtype=dtype)
     deform = DeformEnergy(laplacian(n), z)
     stages = ABLATION_STAGES[request.ablation]
+    if prep.enhancement and prep.enhancement["strategy"] == "none":
+        stages = without_enhancement(stages)
     ckpt = _Checkpoint(out, request_hash(request, prep))
 
     # weights from rho (section 3.5) unless given
@@ -299,7 +359,9 @@ def run_design(
         rho = float("nan")
         weights = {k: float(v) for k, v in given.items()}  # type: ignore[arg-type]
     else:
-        rho = compatibility(rig, base, prep.enhanced, targets_for("enhanced", SIGMA_LARGE), SIGMA_LARGE, dtype=dtype)
+        kind = stages[0].targets  # rho of the images the first stage aims at
+        imgs = prep.enhanced if kind == "enhanced" else prep.render
+        rho = compatibility(rig, base, imgs, targets_for(kind, SIGMA_LARGE), SIGMA_LARGE, dtype=dtype)
         weights = {k: (float(given[k]) if given[k] is not None else WEIGHT_FACTORS[k] * rho) for k in WEIGHT_FACTORS}
     t_setup = time.perf_counter() - t0
 
@@ -308,9 +370,11 @@ def run_design(
     if prep.placement:
         metrics["prism_placement"] = prep.placement
     first = 0
+    earlier_s = 0.0  # wall time of earlier (interrupted) runs that the checkpoint carries
     resumed = ckpt.load()
     if resumed is not None:
         first = resumed["stage"]
+        earlier_s = resumed["elapsed_s"]
         h = torch.as_tensor(resumed["h"], dtype=dtype)
         c = torch.as_tensor(resumed["c"], dtype=dtype)
         log = resumed["log"]
@@ -375,9 +439,14 @@ def run_design(
             # Save the state this stage started from: resuming re-runs the
             # stage from there, which gives exactly the uninterrupted result.
             done_log = [e for e in log if e["stage"] != spec.name]
-            ckpt.save(si, h.numpy(), c.numpy(), done_log, metrics, weights)
+            ckpt.save(si, h.numpy(), c.numpy(), done_log, metrics, weights, earlier_s + stage_t0 - t_start)
+            saved = (
+                f"no stage had finished yet; the start of the first stage is saved in {ckpt.dir}"
+                if si == 0
+                else f"stage {si} of {len(stages)} ({stages[si - 1].name}) was the last to finish and is saved in {ckpt.dir}"
+            )
             raise Interrupted(
-                f"interrupted in stage {spec.name}; the last finished stage is saved in {ckpt.dir}. "
+                f"interrupted in stage {spec.name} ({si + 1} of {len(stages)}); {saved}. "
                 "Run the same command again to resume."
             ) from None
         h, c = res.h, res.c
@@ -418,7 +487,7 @@ def run_design(
             }
         )
         progress(spec.name, res.iterations, request.max_iters, {**(res.log[-1] if res.log else {}), "E_total": res.energy}, res.seconds)
-        ckpt.save(si + 1, h.numpy(), c.numpy(), log, metrics, weights)
+        ckpt.save(si + 1, h.numpy(), c.numpy(), log, metrics, weights, earlier_s + time.perf_counter() - t_start)
 
     # texturing with the final shape
     t0 = time.perf_counter()
@@ -437,7 +506,7 @@ def run_design(
         texture=tex.texture,
         face_uvs=tex.face_uvs,
         face_view=tex.face_view,
-        parameters=_parameters(request, weights, rho),
+        parameters=_parameters(request, weights, rho, stages, prep.enhancement),
         metrics=metrics,
         inputs=prep.inputs,
         # the inputs as meant, at the texture's detail: what verify compares prints with
@@ -449,7 +518,11 @@ def run_design(
     previews, final_metrics = make_previews(design, rig, prep, c.numpy(), log)
     metrics.update(final_metrics)
     metrics["previews_s"] = time.perf_counter() - t0
-    metrics["total_s"] = time.perf_counter() - t_start
+    # total_s: the whole design, earlier interrupted runs included (up to their checkpoint)
+    metrics["total_s"] = earlier_s + time.perf_counter() - t_start
+    if resumed is not None:
+        metrics["this_run_s"] = time.perf_counter() - t_start
+        metrics["resumed_after_stage"] = first
     if not request.record_times:
         _drop_times(metrics)
     energy_log = "\n".join(json.dumps(e) for e in log).encode() + b"\n"
@@ -461,19 +534,26 @@ def run_design(
     return out
 
 
-_TIME_KEYS = ("setup_s", "texturing_s", "previews_s", "total_s", "seconds", "seconds_per_iteration")
+_TIME_KEYS = ("setup_s", "texturing_s", "previews_s", "total_s", "this_run_s", "seconds", "seconds_per_iteration")
 
 
 def _drop_times(metrics: dict[str, Any]) -> None:
     """Remove wall-clock times (in place), so the design folder is reproducible byte for byte."""
     for key in _TIME_KEYS:
         metrics.pop(key, None)
+    metrics.pop("resumed_after_stage", None)  # how the run went, not what it made: a resumed run is the same design
     for st in metrics.get("stages", []):
         for key in _TIME_KEYS:
             st.pop(key, None)
 
 
-def _parameters(request: DesignRequest, weights: dict[str, float], rho: float) -> dict[str, Any]:
+def _parameters(
+    request: DesignRequest,
+    weights: dict[str, float],
+    rho: float,
+    stages: list[StageSpec],
+    enhancement: dict[str, str] | None,
+) -> dict[str, Any]:
     d = asdict(request)
     for k, v in list(d.items()):
         if isinstance(v, Path):
@@ -482,5 +562,6 @@ def _parameters(request: DesignRequest, weights: dict[str, float], rho: float) -
             d[k] = Path(v).name  # a file's name, not the machine's path to it
     d["weights_used"] = weights
     d["rho"] = rho
-    d["stages"] = [asdict(s) for s in ABLATION_STAGES[request.ablation]]
+    d["stages"] = [asdict(s) for s in stages]
+    d["enhancement_used"] = dict(enhancement or {})
     return d

@@ -9,6 +9,11 @@ from typing import Any
 
 from saucerfab.errors import ConfigError
 
+#: conflict-reduction strategies of the full method: "subject" is the paper's
+#: black-white enhancement (each picture needs a clear subject), "none" uses the
+#: pictures as they are (Figure 11 e), "auto" picks per pair (see optimize/pipeline.py)
+ENHANCEMENTS = ("auto", "subject", "none")
+
 
 @dataclass(frozen=True)
 class DesignRequest:
@@ -37,9 +42,18 @@ class DesignRequest:
             full method reaches lower E_visual and E_deform (RESULTS.md).
         ablation: one of "full" (the paper's method), "no_deform", "laplacian",
             "laplacian_bw", "sparse_only", "laplacian_sparse" (Figure 11 a-f).
-        frames: "scene" keeps the scene's view frames (the paper's preset);
-            "contain" / "cover" re-aim them at the saucer and its reflection
-            (:mod:`saucerfab.optimize.framing`).
+        frames: "contain" (the default) re-aims the scene's view frames so
+            each whole picture lands on the saucer or its reflection; "cover"
+            so the saucer fills each frame (the pictures' margins fall off
+            it); "scene" keeps the scene's frames as they are (the paper's
+            preset, which puts part of each picture where no saucer is:
+            benchmarks/RESULTS.md, Verify). See :mod:`saucerfab.optimize.framing`.
+        enhancement: "auto" (the default) uses the paper's black-white
+            enhancement when every picture has a clear subject (an alpha
+            channel, a mask file, or a subject on a plain background) and
+            the pictures as they are otherwise (full-bleed photographs);
+            "subject" always enhances (a picture without a usable mask is
+            refused); "none" never does. Only with ``ablation="full"``.
         color_init: "gray" (0.5 everywhere, the paper's choice) or "projected"
             (each face coloured from the enhanced targets by the texturing
             step, the paper's Figure 12 (c), which it reports as comparable;
@@ -73,12 +87,14 @@ class DesignRequest:
     max_iters: int = 400
     barrier_weight: float = 0.01
     ablation: str = "full"
-    frames: str = "scene"
+    frames: str = "contain"
+    enhancement: str = "auto"
     prism_placement: str = "auto"
     color_init: str = "gray"
     record_times: bool = True
     extra: dict[str, Any] = field(default_factory=dict)
 
+    ENHANCEMENTS = ENHANCEMENTS
     ABLATIONS = ("full", "no_deform", "laplacian", "laplacian_bw", "sparse_only", "laplacian_sparse")
 
     def __post_init__(self) -> None:
@@ -88,6 +104,13 @@ class DesignRequest:
                 object.__setattr__(self, name, Path(os.fspath(v)))
         if self.ablation not in self.ABLATIONS:
             raise ConfigError(f"unknown ablation {self.ablation!r}; use one of {self.ABLATIONS}")
+        if self.enhancement not in ENHANCEMENTS:
+            raise ConfigError(f"enhancement must be one of {', '.join(ENHANCEMENTS)}, got {self.enhancement!r}")
+        if self.enhancement != "auto" and self.ablation != "full":
+            raise ConfigError(
+                f"--enhancement {self.enhancement} chooses the targets of the full method, but --ablation "
+                f"{self.ablation} fixes its own; give one of the two"
+            )
         if self.frames not in ("scene", "contain", "cover"):
             raise ConfigError(f"frames must be 'scene', 'contain' or 'cover', got {self.frames!r}")
         if self.prism_placement not in ("auto", "as_given"):

@@ -80,5 +80,25 @@ ABLATION_STAGES: dict[str, list[StageSpec]] = {
     "full": _lap("bw", "enhanced") + [StageSpec("sparse", "enhanced", SIGMA_SPARSE, "sparse", "lam")],
 }
 
+def without_enhancement(stages: list[StageSpec]) -> list[StageSpec]:
+    """The same stages against the original images (for pictures with no clear subject).
+
+    Of the paper's method this is Figure 11 (e), Laplacian then sparse
+    without enhancement, which benchmarks/RESULTS.md measures as good as or
+    better than the full method on 2 of 3 bundled pairs.
+    """
+    from dataclasses import replace
+
+    return [
+        replace(st, targets="original", name=st.name.replace("bw_", "plain_", 1)) if st.targets == "enhanced" else st
+        for st in stages
+    ]
+
+
 #: rho multipliers (section 3.5)
 WEIGHT_FACTORS = {"w_large": 0.08, "w_small": 0.2, "lam": 6e-5}
+
+
+def weights_used(ablation: str) -> set[str]:
+    """The weight options (``w_large``, ``w_small``, ``lam``) that the stages of ``ablation`` use."""
+    return {spec.weight for spec in ABLATION_STAGES[ablation] if spec.weight}

@@ -33,10 +33,11 @@ MAX_SCENE_JSON_BYTES = 1 << 20
 #: largest reference picture read, bytes and pixels
 MAX_REFERENCE_BYTES = 64 << 20
 MAX_REFERENCE_PIXELS = 4096 * 4096
-#: mesh formats verify renders, in the order it prefers them (textured formats)
-RENDERED_FORMATS = ("obj", "3mf", "glb")
+#: mesh formats verify renders, in the order it prefers them (textured formats;
+#: "zip" is an OBJ zipped with its MTL and PNG, as ``export --zip-obj`` writes it)
+RENDERED_FORMATS = ("obj", "zip", "3mf", "glb")
 #: suffix of each rendered format's mesh file
-_SUFFIX = {"obj": ".obj", "3mf": ".3mf", "glb": ".glb"}
+_SUFFIX = {"obj": ".obj", "zip": ".zip", "3mf": ".3mf", "glb": ".glb"}
 #: view names a print may have, in report order
 VIEW_NAMES = ("direct", "reflected", "reflected2")
 CUP_SHAPES = ("circle", "ellipse", "prism")
@@ -240,7 +241,7 @@ class PrintedSurface:
 
     Attributes:
         path: the mesh file.
-        format: ``obj``, ``3mf`` or ``glb``.
+        format: ``obj``, ``zip`` (a zipped OBJ), ``3mf`` or ``glb``.
         vertices: (V, 3) float64 positions, mm, file frame (z up).
         faces: (F, 3) int64 vertex indices.
         corner_uv: (F, 3, 2) texture coordinates per face corner (u right,

@@ -66,7 +66,7 @@ JSON_SCHEMA: dict[str, Any] = {
                 "required": ["path", "format", "views"],
                 "properties": {
                     "path": {"type": "string", "description": "the file's name in the folder"},
-                    "format": {"enum": ["obj", "3mf", "glb"]},
+                    "format": {"enum": ["obj", "zip", "3mf", "glb"]},
                     "views": {"type": "array", "items": VIEW_SCORE},
                 },
             },
