@@ -14,6 +14,9 @@ Layout (schema ``saucerfab.design/1``)::
                          into the view's square frame (what ``saucerfab verify``
                          compares the print with; ``export`` copies them)
       previews/          PNG previews (optional, for people)
+      report.html        the design's page (saucerfab.report_page), written with the folder
+      verify/            the quick verify of a trial export (``saucerfab design``
+                         writes it after the folder; optional)
 
 Grid and face order follow :mod:`saucerfab.heightfield` (``triangulate(N)``).
 Texture coordinates follow the OBJ/glTF-independent convention used in all
