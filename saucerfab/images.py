@@ -33,6 +33,14 @@ filled with the background colour: the one given, or the per-channel median
 of the image's outer ring 2 % of the short side wide (at least 1 pixel).
 Images with alpha get transparent padding (alpha 0; colour = that background).
 
+That is ``fit="pad"``, the default: the whole image is shown. ``fit="crop"``
+(``saucerfab design --fit crop``, what designers expect for photographs)
+scales by ``S / min(W, H)`` instead, so the short side spans the frame and
+the long side's margins are cut off equally (the odd pixel at the
+right/bottom); nothing is padded. A mask file follows its image's rule.
+The background colour (``--background``) is also the colour transparency
+is composited over, in the picture the design aims at and verify compares with.
+
 Animated images (APNG, animated WebP) use their first frame; the
 :class:`LoadedImage` carries a note saying so. A 16-bit RGB(A) PNG is
 decoded by Pillow (13) at 8 bits per channel (noted); 16-bit grayscale
@@ -493,19 +501,42 @@ def _resize_plane(plane: np.ndarray, width: int, height: int) -> np.ndarray:
     return np.asarray(im.resize((width, height), Image.Resampling.LANCZOS), dtype=np.float32)
 
 
-def fit_box(width: int, height: int, frame_w: int, frame_h: int) -> tuple[int, int, int, int]:
+#: fit rules of an image into its frame: "pad" shows the whole image (bands of
+#: the background colour beside it), "crop" fills the frame (its margins cut off)
+FITS = ("pad", "crop")
+
+
+def fit_box(width: int, height: int, frame_w: int, frame_h: int, fit: str = "pad") -> tuple[int, int, int, int]:
     """Where the fit rule puts a ``width`` x ``height`` image in a frame.
 
-    Scale ``min(frame_w / width, frame_h / height)``, rounded sizes (>= 1),
-    centred with the odd leftover pixel to the right/bottom.
+    ``pad``: scale ``min(frame_w / width, frame_h / height)``, so the whole
+    image lies inside; ``crop``: scale ``max(...)``, so it covers the frame
+    and the box reaches past it (negative ``x0`` or ``y0``). Rounded sizes
+    (>= 1), centred with the odd leftover pixel to the right/bottom.
 
     Returns:
-        (x0, y0, w, h): left column, top row and size of the content box, pixels.
+        (x0, y0, w, h): left column, top row and size of the scaled image, pixels.
     """
-    s = min(frame_w / width, frame_h / height)
-    w = min(frame_w, max(1, int(round(width * s))))
-    h = min(frame_h, max(1, int(round(height * s))))
+    if fit not in FITS:
+        raise ConfigError(f"fit must be one of {', '.join(FITS)}, got {fit!r}")
+    if fit == "crop":
+        s = max(frame_w / width, frame_h / height)
+        w = max(frame_w, int(round(width * s)))
+        h = max(frame_h, int(round(height * s)))
+    else:
+        s = min(frame_w / width, frame_h / height)
+        w = min(frame_w, max(1, int(round(width * s))))
+        h = min(frame_h, max(1, int(round(height * s))))
     return (frame_w - w) // 2, (frame_h - h) // 2, w, h
+
+
+def _paste(dest: np.ndarray, src: np.ndarray, x0: int, y0: int) -> None:
+    """Put ``src`` into ``dest`` with its top-left corner at (x0, y0), cutting what falls outside."""
+    h, w = src.shape[:2]
+    fh, fw = dest.shape[:2]
+    dx0, dy0 = max(0, x0), max(0, y0)
+    dx1, dy1 = min(fw, x0 + w), min(fh, y0 + h)
+    dest[dy0:dy1, dx0:dx1] = src[dy0 - y0 : dy1 - y0, dx0 - x0 : dx1 - x0]
 
 
 def _fit_into(
@@ -514,17 +545,18 @@ def _fit_into(
     frame_w: int,
     frame_h: int,
     background: np.ndarray,
+    fit: str = "pad",
 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """The fit rule into a ``frame_w`` x ``frame_h`` frame (see the module docstring)."""
     src_h, src_w = rgb.shape[:2]
-    x0, y0, w, h = fit_box(src_w, src_h, frame_w, frame_h)
+    x0, y0, w, h = fit_box(src_w, src_h, frame_w, frame_h, fit)
     out = np.empty((frame_h, frame_w, 3), np.float32)
     out[...] = background.reshape(1, 1, 3)
     fill = np.ones((frame_h, frame_w), bool)
-    fill[y0 : y0 + h, x0 : x0 + w] = False
+    _paste(fill, np.zeros((h, w), bool), x0, y0)
     if alpha is None:
         planes = [_resize_plane(rgb[..., c], w, h) for c in range(3)]
-        out[y0 : y0 + h, x0 : x0 + w] = np.clip(np.stack(planes, axis=-1), 0.0, 1.0)
+        _paste(out, np.clip(np.stack(planes, axis=-1), 0.0, 1.0), x0, y0)
         return out, None, fill
     # Premultiplied resampling: a transparent pixel's (arbitrary) colour has
     # zero weight, so no dark or coloured fringe appears along the subject.
@@ -533,9 +565,9 @@ def _fit_into(
     safe = np.maximum(a, 1e-6)[..., None]
     col = np.clip(np.stack(pm, axis=-1) / safe, 0.0, 1.0)
     col = np.where(a[..., None] > 1e-6, col, background.reshape(1, 1, 3))
-    out[y0 : y0 + h, x0 : x0 + w] = col
+    _paste(out, col, x0, y0)
     out_a = np.zeros((frame_h, frame_w), np.float32)
-    out_a[y0 : y0 + h, x0 : x0 + w] = a
+    _paste(out_a, a, x0, y0)
     return out, out_a, fill
 
 
@@ -557,6 +589,7 @@ def fit_square(
     size: int,
     *,
     background: Sequence[float] | str | None = None,
+    fit: str = "pad",
 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """Fit an image into the ``size`` x ``size`` view frame (the fit rule).
 
@@ -575,7 +608,7 @@ def fit_square(
         raise ValueError(f"size must be a positive integer, got {size!r}")
     rgb, alpha = _split(img)
     bg = estimate_background(rgb, alpha) if background is None else parse_colour(background)
-    return _fit_into(rgb, alpha, int(size), int(size), bg)
+    return _fit_into(rgb, alpha, int(size), int(size), bg, fit)
 
 
 # --------------------------------------------------------------------------- masks
@@ -730,6 +763,7 @@ def _mask_in_frame(
     method: str,
     max_pixels: int,
     max_bytes: int,
+    fit: str = "pad",
 ) -> tuple[np.ndarray, str]:
     """Foreground mask (H, W) bool of an image in its frame, and the method used."""
     if method not in ("auto", "alpha", "file", "threshold", "none"):
@@ -758,9 +792,9 @@ def _mask_in_frame(
             )
         # The mask goes through the same fit rule as its image, so it lands
         # on the same pixels of the frame; padding is background.
-        x0, y0, bw, bh = fit_box(mw, mh, w, h)
+        x0, y0, bw, bh = fit_box(mw, mh, w, h, fit)
         mask = np.zeros((h, w), bool)
-        mask[y0 : y0 + bh, x0 : x0 + bw] = _resize_plane(cover, bw, bh) > 0.5
+        _paste(mask, _resize_plane(cover, bw, bh) > 0.5, x0, y0)
         mask &= content
         _check_fraction(mask, content, "given", name)
         return mask, "file"
@@ -838,11 +872,16 @@ def prepare_image(
     max_pixels: int = DEFAULT_MAX_PIXELS,
     max_bytes: int = DEFAULT_MAX_BYTES,
     loaded: LoadedImage | None = None,
+    fit: str = "pad",
 ) -> ViewImage:
     """Load, fit into the ``size`` x ``size`` frame and mask one input image.
 
     ``loaded``: the image already decoded from ``path`` (by :func:`load_image`),
     so a caller that also fits it at another size decodes the file once.
+    ``fit``: ``pad`` (the whole image, padded with ``background``) or
+    ``crop`` (the frame filled, the image's margins cut off); a mask file
+    follows its image's rule. ``background``: the padding and the colour
+    transparency is composited over; None estimates it from the border.
 
     The mask is computed in the fitted frame (so the morphology's pixel
     sizes are relative to the frame the optimizer uses). See
@@ -855,9 +894,9 @@ def prepare_image(
 
     img = loaded if loaded is not None else load_image(path, max_pixels=max_pixels, max_bytes=max_bytes)
     bg = estimate_background(img.rgb, img.alpha) if background is None else parse_colour(background)
-    rgb, alpha, fill = fit_square(img, size, background=bg)
+    rgb, alpha, fill = fit_square(img, size, background=bg, fit=fit)
     mask, source = _mask_in_frame(
-        rgb, alpha, fill, img.size, img.path, mask_path, mask_method, max_pixels, max_bytes
+        rgb, alpha, fill, img.size, img.path, mask_path, mask_method, max_pixels, max_bytes, fit
     )
     return ViewImage(
         rgb=rgb,

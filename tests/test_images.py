@@ -661,3 +661,46 @@ def test_samples_have_clear_subjects(name):
         assert v.bit_depth == 16
     if name == "fish_wide.jpg":
         assert v.fill.any() and v.source_size == (640, 400)
+
+
+# --------------------------------------------------------------------------- fit rules (issue 14)
+
+
+def test_crop_fills_the_frame_and_cuts_the_long_side_equally():
+    from saucerfab.images import fit_box, fit_square
+
+    assert fit_box(640, 400, 100, 100, "pad") == (0, 19, 100, 62)
+    x0, y0, w, h = fit_box(640, 400, 100, 100, "crop")
+    assert (y0, h) == (0, 100) and w == 160 and x0 == -30  # 30 px cut on each side
+    # a wide image whose left and right halves differ: crop keeps the middle, pads nothing
+    img = np.zeros((40, 80, 3), np.float32)
+    img[:, 40:] = 1.0
+    rgb, alpha, fill = fit_square(img, 40, fit="crop", background="#00ff00")
+    assert not fill.any() and alpha is None
+    assert np.allclose(rgb[:, :15], 0.0, atol=0.02) and np.allclose(rgb[:, 25:], 1.0, atol=0.02)
+    rgb, _, fill = fit_square(img, 40, fit="pad", background="#00ff00")
+    assert fill[:10].all() and np.allclose(rgb[0, 0], [0, 1, 0])  # the band has the background colour
+    with pytest.raises(Exception, match="fit must be"):
+        fit_box(10, 10, 5, 5, "stretch")
+
+
+def test_design_fit_and_background_options(tmp_path):
+    from saucerfab.errors import ConfigError
+    from saucerfab.optimize.pipeline import prepare
+    from saucerfab.optimize.request import DesignRequest
+
+    samples = Path(__file__).resolve().parents[1] / "samples"
+    base = dict(resolution=16, image_size=64)
+    pad = prepare(DesignRequest(samples / "fish_wide.jpg", samples / "reflected_star.png", **base))
+    crop = prepare(DesignRequest(samples / "fish_wide.jpg", samples / "reflected_star.png", fit="direct=crop", **base))
+    white = prepare(DesignRequest(samples / "fish_wide.jpg", samples / "reflected_star.png", background="#ffffff", **base))
+    # crop scales the 640 x 400 fish by 64/400 instead of 64/640: its subject covers ~2.6x the pixels
+    assert crop.masks["direct"].sum() > 1.8 * pad.masks["direct"].sum()
+    assert crop.masks["reflected"].sum() == pad.masks["reflected"].sum()  # the rule was for direct only
+    assert np.allclose(white.render["direct"][0, 0], 1.0)
+    # the star's transparent background shows the colour asked for
+    assert np.allclose(white.render["reflected"][0, 0], 1.0)
+    assert crop.render["reflected"].shape == pad.render["reflected"].shape
+    for bad in ({"fit": "stretch"}, {"fit": "direct=zoom"}, {"fit": "left=crop"}, {"background": "blue"}):
+        with pytest.raises(ConfigError):
+            DesignRequest(samples / "fish_wide.jpg", samples / "reflected_star.png", **bad)

@@ -70,6 +70,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="leave wall-clock times out of the design folder (byte-identical reruns)",
     )
     p.add_argument(
+        "--fit",
+        default=None,
+        metavar="RULE",
+        help="how each picture fills its square frame: pad (the whole picture, bands of --background beside a "
+        "non-square one; the default) or crop (the frame filled, the long side's margins cut off, as for "
+        "photos); or per picture, e.g. direct=crop,reflected=pad",
+    )
+    p.add_argument(
+        "--background",
+        default=None,
+        metavar="COLOUR",
+        help="#rrggbb of the padding and of what transparent areas show (default: each picture's border colour)",
+    )
+    p.add_argument(
         "--enhancement",
         default=None,
         choices=["auto", "subject", "none"],
@@ -160,6 +174,8 @@ def run(args: argparse.Namespace) -> int:
         ablation=args.ablation,
         **({"frames": args.frames} if args.frames is not None else {}),
         **({"enhancement": args.enhancement} if args.enhancement is not None else {}),
+        **({"fit": args.fit} if args.fit is not None else {}),
+        **({"background": args.background} if args.background is not None else {}),
         prism_placement=args.prism_placement,
         color_init=args.color_init,
         record_times=not args.no_times,

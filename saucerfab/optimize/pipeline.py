@@ -129,24 +129,26 @@ def prepare(request: DesignRequest) -> Prepared:
     }
     render, texture, masks, inputs = {}, {}, {}, {}
     problems: list[str] = []
+    fits = request.fit_by_view()
     for name in names:
         path = paths[name]
         if path is None:  # pragma: no cover - names only lists given images
             continue
         loaded = im.load_image(path)  # decoded once, fitted at two sizes
         fname = Path(path).name
+        fitting = {"fit": fits[name], "background": request.background}
         if request.enhancement == "none" and request.ablation == "full":
-            view = im.prepare_image(path, s, mask_method="none", loaded=loaded)
+            view = im.prepare_image(path, s, mask_method="none", loaded=loaded, **fitting)
         else:
             try:
-                view = im.prepare_image(path, s, mask_path=mask_paths[name], loaded=loaded)
+                view = im.prepare_image(path, s, mask_path=mask_paths[name], loaded=loaded, **fitting)
             except MaskError as exc:
                 if request.enhancement == "subject" or request.ablation != "full":
                     raise
                 # the reason without the machine's path to the file (design folders are reproducible)
                 why = str(exc).split(". Give")[0].replace(repr(str(path)), repr(fname))
                 problems.append(f"{name} picture: {why}")
-                view = im.prepare_image(path, s, mask_method="none", loaded=loaded)
+                view = im.prepare_image(path, s, mask_method="none", loaded=loaded, **fitting)
             else:
                 if view.mask_source == "threshold":
                     plain = im.plain_background_share(view)
@@ -156,7 +158,7 @@ def prepare(request: DesignRequest) -> Prepared:
         render[name] = view.flattened()
         masks[name] = view.mask
         # the texture keeps more of the input's detail than the render size
-        rgb_t, alpha_t, _ = im.fit_square(loaded, t, background=view.background)
+        rgb_t, alpha_t, _ = im.fit_square(loaded, t, background=view.background, fit=fits[name])
         texture[name] = rgb_t if alpha_t is None else im.flatten_alpha(rgb_t, alpha_t, view.background)
         inputs[name] = {"file": Path(path).name, "sha256": view.sha256, "mask_source": view.mask_source}
         if view.notes:

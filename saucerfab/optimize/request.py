@@ -54,6 +54,12 @@ class DesignRequest:
             the pictures as they are otherwise (full-bleed photographs);
             "subject" always enhances (a picture without a usable mask is
             refused); "none" never does. Only with ``ablation="full"``.
+        fit: how each picture goes into its square frame: "pad" (the whole
+            picture, bands of the background beside a non-square one) or
+            "crop" (the frame filled, the long side's margins cut off); one
+            rule for all, or per picture as "direct=crop,reflected=pad".
+        background: "#rrggbb" of the padding and of what transparent areas
+            show; None: each picture's border colour (median of its outer ring).
         color_init: "gray" (0.5 everywhere, the paper's choice) or "projected"
             (each face coloured from the enhanced targets by the texturing
             step, the paper's Figure 12 (c), which it reports as comparable;
@@ -89,6 +95,8 @@ class DesignRequest:
     ablation: str = "full"
     frames: str = "contain"
     enhancement: str = "auto"
+    fit: str = "pad"
+    background: str | None = None
     prism_placement: str = "auto"
     color_init: str = "gray"
     record_times: bool = True
@@ -97,6 +105,29 @@ class DesignRequest:
     ENHANCEMENTS = ENHANCEMENTS
     ABLATIONS = ("full", "no_deform", "laplacian", "laplacian_bw", "sparse_only", "laplacian_sparse")
 
+    def fit_by_view(self) -> dict[str, str]:
+        """The fit rule of each view (``direct``, ``reflected``, ``reflected2``) from :attr:`fit`.
+
+        Raises:
+            ConfigError: not ``pad``, ``crop`` or ``VIEW=RULE,...`` with known views and rules.
+        """
+        from saucerfab.images import FITS
+
+        views = ("direct", "reflected", "reflected2")
+        text = str(self.fit).strip().lower()
+        if text in FITS:
+            return dict.fromkeys(views, text)
+        out = dict.fromkeys(views, "pad")
+        for part in text.split(","):
+            view, _, rule = part.partition("=")
+            if view.strip() not in views or rule.strip() not in FITS:
+                raise ConfigError(
+                    f"--fit {self.fit!r}: give pad or crop, or per picture e.g. 'direct=crop,reflected=pad' "
+                    f"(pictures: {', '.join(views)}; rules: {', '.join(FITS)})"
+                )
+            out[view.strip()] = rule.strip()
+        return out
+
     def __post_init__(self) -> None:
         for name in ("direct", "reflected", "reflected2", "direct_mask", "reflected_mask", "reflected2_mask"):
             v = getattr(self, name)
@@ -104,6 +135,11 @@ class DesignRequest:
                 object.__setattr__(self, name, Path(os.fspath(v)))
         if self.ablation not in self.ABLATIONS:
             raise ConfigError(f"unknown ablation {self.ablation!r}; use one of {self.ABLATIONS}")
+        self.fit_by_view()  # refuses a bad --fit now, before any work
+        if self.background is not None:
+            from saucerfab.images import parse_colour
+
+            parse_colour(self.background)
         if self.enhancement not in ENHANCEMENTS:
             raise ConfigError(f"enhancement must be one of {', '.join(ENHANCEMENTS)}, got {self.enhancement!r}")
         if self.enhancement != "auto" and self.ablation != "full":
