@@ -35,7 +35,7 @@ import numpy as np
 from saucerfab import __version__
 from saucerfab.errors import ConfigError
 from saucerfab.verify.eyes import Eye, EyeSpec, eye_positions
-from saucerfab.verify.metrics import best_shift, psnr, ssim
+from saucerfab.verify.metrics import best_shift, psnr, shifted, ssim
 from saucerfab.verify.printfolder import (
     PrintScene,
     VerifyInputError,
@@ -138,7 +138,8 @@ class VerifyResult:
         seconds: wall time of the whole verification.
         pictures_dir: where the pictures were written, or None.
         renderer: name, version and variant of the renderer.
-        renders: the primary file's renders, (eye, view) -> (rgb, region), for reports.
+        renders: the primary file's renders for reports and tests: (eye, view) -> (S, S, 3)
+            rgb, and (eye, view + ":region") -> (S, S) bool, the pixels compared.
     """
 
     folder: Path
@@ -325,8 +326,6 @@ def verify_print(
                 if eye.name == "design":
                     sh_dx, sh_dy, p1, reg1, ref1 = 0, 0, p0, region, ref
                 else:
-                    from saucerfab.verify.metrics import shifted
-
                     sh = best_shift(r.rgb, ref, region, max_shift)
                     sh_dx, sh_dy, p1, reg1 = sh.dx, sh.dy, sh.psnr_db, sh.region
                     ref1 = shifted(ref, sh.dx, sh.dy)[0]
