@@ -47,10 +47,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--frames",
         default=None,
-        choices=["contain", "cover", "scene"],
+        choices=["contain", "cover", "inscribed", "scene"],
         help="view frames: fitted so each whole image lands on the saucer or its reflection (contain, the "
-        "default), or so the saucer fills each frame (cover), or the scene's own frames (scene: the paper's "
-        "preset, which puts part of each image off the saucer)",
+        "default), or so the saucer fills each frame (cover), or the largest square frame wholly on the saucer "
+        "and its reflection (inscribed: smaller pictures, no corner lost), or the scene's own frames (scene: the "
+        "paper's preset, which puts part of each image off the saucer)",
     )
     p.add_argument(
         "--prism-placement",

@@ -147,8 +147,8 @@ class DesignRequest:
                 f"--enhancement {self.enhancement} chooses the targets of the full method, but --ablation "
                 f"{self.ablation} fixes its own; give one of the two"
             )
-        if self.frames not in ("scene", "contain", "cover"):
-            raise ConfigError(f"frames must be 'scene', 'contain' or 'cover', got {self.frames!r}")
+        if self.frames not in ("scene", "contain", "cover", "inscribed"):
+            raise ConfigError(f"frames must be 'scene', 'contain', 'cover' or 'inscribed', got {self.frames!r}")
         if self.prism_placement not in ("auto", "as_given"):
             raise ConfigError(f"prism_placement must be 'auto' or 'as_given', got {self.prism_placement!r}")
         if self.color_init not in ("gray", "projected"):
