@@ -288,7 +288,7 @@ def test_enhancement_with_another_ablation_is_refused(capsys) -> None:  # noqa: 
 def test_the_default_frames_show_each_whole_picture(tmp_path) -> None:  # noqa: ANN001
     from saucerfab.scene import paper_scene
 
-    assert DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png").frames == "contain"
+    assert DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png").frames == "inscribed"
     out = run_design(DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", **TINY_REQ),
                      tmp_path / "d", progress=lambda *a: None)
     scene = load_design(out).scene

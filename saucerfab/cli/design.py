@@ -47,11 +47,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--frames",
         default=None,
-        choices=["contain", "cover", "inscribed", "scene"],
-        help="view frames: fitted so each whole image lands on the saucer or its reflection (contain, the "
-        "default), or so the saucer fills each frame (cover), or the largest square frame wholly on the saucer "
-        "and its reflection (inscribed: smaller pictures, no corner lost), or the scene's own frames (scene: the "
-        "paper's preset, which puts part of each image off the saucer)",
+        choices=["inscribed", "contain", "cover", "scene"],
+        help="view frames: the largest square wholly on the saucer and wholly on its reflection, so each "
+        "whole image is seen (inscribed, the default); the largest square in the bounding box of each "
+        "(contain: larger pictures, the reflected one's corners fall off the reflection); so the saucer fills "
+        "each frame (cover); or the scene's own frames (scene: the paper's preset, which puts part of each "
+        "image off the saucer)",
     )
     p.add_argument(
         "--prism-placement",

@@ -16,10 +16,12 @@ camera and re-aims each frame at the region the saucer covers in it:
   of the reflected frame covered) while this frame lies wholly on it, at the
   price of a smaller picture.
 
-``"contain"`` is the default of a design (``DesignRequest.frames``): the
-paper's preset (``frames="scene"``) stays available, and measured with
-``saucerfab verify`` it shows only 66 % of the direct picture and 31 % of the
-reflected one on the saucer (benchmarks/RESULTS.md, Verify).
+``"inscribed"`` is the default of a design (``DesignRequest.frames``):
+measured with ``saucerfab verify`` it shows each whole picture (100 % of
+both frames on the saucer and its reflection), where ``contain`` loses the
+reflected frame's corners (72 %) and the paper's preset (``frames="scene"``,
+still available) shows 66 % of the direct and 31 % of the reflected frame
+(benchmarks/RESULTS.md, Verify and Default path).
 """
 
 from __future__ import annotations
@@ -106,7 +108,7 @@ def fit_frames(
 
     Args:
         heights: (N, N) base heights (the region barely depends on them).
-        mode: "contain" or "cover" (see the module docstring).
+        mode: "inscribed", "contain" or "cover" (see the module docstring).
         groups: prism facet groups of two reflected images: the reflected
             frame is fitted to the first group's region, ``reflected2`` to the second.
     """

@@ -42,12 +42,16 @@ class DesignRequest:
             full method reaches lower E_visual and E_deform (RESULTS.md).
         ablation: one of "full" (the paper's method), "no_deform", "laplacian",
             "laplacian_bw", "sparse_only", "laplacian_sparse" (Figure 11 a-f).
-        frames: "contain" (the default) re-aims the scene's view frames so
-            each whole picture lands on the saucer or its reflection; "cover"
-            so the saucer fills each frame (the pictures' margins fall off
-            it); "scene" keeps the scene's frames as they are (the paper's
-            preset, which puts part of each picture where no saucer is:
-            benchmarks/RESULTS.md, Verify). See :mod:`saucerfab.optimize.framing`.
+        frames: "inscribed" (the default) re-aims the scene's view frames at
+            the largest square wholly on the saucer and wholly on its
+            reflection, so each whole picture is seen; "contain" at the
+            largest square in the bounding box of each (the reflected
+            picture's corners then fall off the reflection); "cover" so the
+            saucer fills each frame (the pictures' margins fall off it);
+            "scene" keeps the scene's frames as they are (the paper's
+            preset, which puts part of each picture where no saucer is).
+            Measured in benchmarks/RESULTS.md (Verify, Default path). See
+            :mod:`saucerfab.optimize.framing`.
         enhancement: "auto" (the default) uses the paper's black-white
             enhancement when every picture has a clear subject (an alpha
             channel, a mask file, or a subject on a plain background) and
@@ -93,7 +97,7 @@ class DesignRequest:
     max_iters: int = 400
     barrier_weight: float = 0.01
     ablation: str = "full"
-    frames: str = "contain"
+    frames: str = "inscribed"
     enhancement: str = "auto"
     fit: str = "pad"
     background: str | None = None
