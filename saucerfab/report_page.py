@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import io
 import json
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -129,7 +128,10 @@ def design_report(design: Design, previews: Mapping[str, bytes], folder: Path | 
     s = scene.mm_per_unit
     m = np.diag([s, s, s, 1.0])
     view_d = viewing_dict(scene, m)
-    where = _where_from_viewing(view_d)
+    from saucerfab.verify.core import stand_point
+
+    cam, cup = view_d["camera"]["position"], view_d["cup"]
+    where = stand_point(cam, cup["center"], cup["bottom_z"], scene.cup_diameter_mm)
 
     def pic(name: str) -> bytes | None:
         return previews.get(name)
@@ -202,15 +204,6 @@ def design_report(design: Design, previews: Mapping[str, bytes], folder: Path | 
     names = " / ".join(str(design.inputs[k].get("file")) for k in ("direct", "reflected", "reflected2")
                        if isinstance(design.inputs.get(k), dict))
     return html_report(sections, title=f"saucerfab design: {names or 'synthetic'}")
-
-
-def _where_from_viewing(view_d: dict[str, Any]) -> dict[str, Any]:
-    """``where_to_stand`` from a viewing dict (camera and cup in mm)."""
-    cam = view_d["camera"]["position"]
-    cup = view_d["cup"]
-    dx, dy, dz = cam[0] - cup["center"][0], cam[1] - cup["center"][1], cam[2] - cup["bottom_z"]
-    horiz = math.hypot(dx, dy)
-    return {"distance_mm": horiz, "height_mm": dz, "straight_line_mm": math.hypot(horiz, dz)}
 
 
 def write_design_report(folder: str | Path) -> Path:

@@ -193,22 +193,31 @@ class VerifyResult:
 
 
 def where_to_stand(scene: PrintScene) -> dict[str, Any]:
-    """The design eye relative to the cup, in millimetres.
+    """The design eye relative to the cup of a print's scene (see :func:`stand_point`)."""
+    return stand_point(scene.camera, scene.cup.center, scene.cup.bottom_z, scene.cup.width_mm)
+
+
+def stand_point(
+    eye: tuple[float, float, float] | list[float],
+    cup_center: tuple[float, float] | list[float],
+    cup_bottom_z: float,
+    cup_width_mm: float,
+) -> dict[str, Any]:
+    """Where the viewer's eye must be, relative to the cup, in millimetres.
 
     ``distance_mm``: horizontal distance from the cup's axis; ``height_mm``:
-    height above the cup's standing plane; ``side``: the horizontal direction
-    from the cup to the eye in the file frame (the saucer lies on that side);
-    ``straight_line_mm``: distance from the cup's bottom centre.
+    height above the cup's standing plane; ``direction_xy``: the horizontal
+    direction from the cup to the eye in the file frame (the saucer lies on
+    that side); ``straight_line_mm``: distance from the cup's bottom centre.
     """
-    cx, cy = scene.cup.center
-    dx, dy, dz = scene.camera[0] - cx, scene.camera[1] - cy, scene.camera[2] - scene.cup.bottom_z
+    dx, dy, dz = eye[0] - cup_center[0], eye[1] - cup_center[1], eye[2] - cup_bottom_z
     horiz = math.hypot(dx, dy)
     return {
         "distance_mm": round(horiz, 1),
         "height_mm": round(dz, 1),
         "straight_line_mm": round(math.sqrt(horiz**2 + dz**2), 1),
         "direction_xy": [round(dx / horiz, 4), round(dy / horiz, 4)] if horiz > 0 else [0.0, 0.0],
-        "cup_width_mm": round(scene.cup.width_mm, 3),
+        "cup_width_mm": round(cup_width_mm, 3),
     }
 
 
