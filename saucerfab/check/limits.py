@@ -12,6 +12,17 @@ Defaults suit a machine with 8 GB or more: checking takes about 1 GB of
 memory per million triangles at peak, so the largest file accepted (5
 million triangles) needs about 5 GB, and a 10-million-face file is refused
 from its header (see ``max_triangles``).
+
+Budgets against amplification (issue 16): what a file *makes* the checker
+do is bounded, not only what it holds - bytes inflated from an archive
+(absolutely and relative to the archive's size), node visits and instanced
+triangles of shared glTF nodes, bytes of glTF buffers, texture pixels
+decoded per file, XML elements and JSON values parsed into trees, VRML
+tokens. Each is priced before the work it bounds, so a small hostile file
+is refused in well under 10 s and 1 GiB (``benchmarks/bench_check_hostile.py``
+measures the worst cases). A file that honestly holds a mesh near
+``max_triangles`` still costs what such a mesh costs (above); lower
+``max_triangles`` to bound that too.
 """
 
 from __future__ import annotations
@@ -35,20 +46,52 @@ class Limits:
             10-million-face file quickly and clearly.
         max_vertices: most vertices a file may declare.
         max_zip_entries: most entries a 3MF archive may list.
-        max_uncompressed_bytes: most bytes extracted from one archive in total
-            (zip bombs are cut off here, whatever the headers claim).
+        max_uncompressed_bytes: most bytes extracted from one archive (zip)
+            or gzip file in total, counted as they stream out (zip bombs are
+            cut off here, whatever the headers claim).
+        max_inflation_ratio: past the first ``free_inflation_bytes``, an
+            archive or gzip file may inflate to at most this many times its
+            own size (0: no ratio bound). Model XML and OBJ text deflate
+            4-10:1 (the checker's own exports: 7:1); a bomb of spaces or
+            zeros 1000:1. So a tiny file cannot hand the checker hundreds of
+            megabytes of content to parse.
+        free_inflation_bytes: bytes any archive may inflate to whatever its
+            ratio (small files with padding or repetitive metadata).
         max_xml_bytes: largest single XML part read from an archive.
         max_xml_tree_bytes: largest XML parsed element by element into a
             tree (memory grows ~10x); the bulk vertex/triangle blocks of
             usual 3MF files take a streaming fast path and do not count.
+        max_xml_elements: most elements (counted as ``<`` characters, an
+            upper bound) an XML part parsed into a tree may hold; each costs
+            ~100-400 bytes and a few microseconds, so 4-byte ``<a/>``
+            elements would otherwise make 25x their size in memory.
         max_json_bytes: largest glTF JSON document parsed.
+        max_json_values: most JSON values (counted as ``{``, ``[`` and ``,``
+            characters, an upper bound) a glTF document may hold; each becomes
+            a Python object of ~50-100 bytes.
+        max_buffer_bytes: most bytes of glTF buffers read for one file in
+            total: external ``.bin`` files and ``data:`` URIs (each URI is
+            read once however many buffers name it; the GLB's own binary
+            chunk is part of the file and counts under ``max_file_bytes``).
         max_texture_bytes: largest texture file read.
         max_texture_pixels: most pixels a texture may have; checked from the
             image header before any pixel is decoded (decompression bombs).
+        max_total_texture_pixels: most pixels decoded over all of one file's
+            textures (an 8192 x 8192 PNG takes ~1-2 s to decode here); the
+            header is checked against what is left before decoding, and a
+            texture past it is reported ``texture_too_large``, not decoded.
+        max_total_texture_bytes: most bytes read over all of one file's
+            textures.
         max_textures: most distinct textures one file may reference.
         max_parts: most mesh parts (3MF objects/components/build items, glTF
             primitive instances, VRML shapes) instanced in total.
+        max_node_visits: most scene-graph node visits (glTF nodes, VRML
+            nodes) instancing may take; nodes shared between parents are
+            priced before the walk, so a tree whose every node lists the
+            next twice is refused by its count, not walked.
         max_nesting: deepest component/node/VRML nesting followed.
+        max_vrml_tokens: most VRML tokens outside number arrays (node and
+            field names, braces, strings; a few microseconds each).
         thin_wall_samples: surface points whose wall thickness is measured
             by an inward ray.
         max_ray_tests: cap on box and triangle tests of the thin-wall rays
@@ -90,15 +133,24 @@ class Limits:
     max_triangles: int = 5_000_000
     max_vertices: int = 15_000_000
     max_zip_entries: int = 10_000
-    max_uncompressed_bytes: int = 1 * GIB
+    max_uncompressed_bytes: int = 256 * MIB
+    max_inflation_ratio: float = 50.0
+    free_inflation_bytes: int = 16 * MIB
     max_xml_bytes: int = 1 * GIB
     max_xml_tree_bytes: int = 128 * MIB
+    max_xml_elements: int = 1_000_000
     max_json_bytes: int = 64 * MIB
+    max_json_values: int = 2_000_000
+    max_buffer_bytes: int = 256 * MIB
     max_texture_bytes: int = 256 * MIB
     max_texture_pixels: int = 8192 * 8192
+    max_total_texture_pixels: int = 2 * 8192 * 8192
+    max_total_texture_bytes: int = 512 * MIB
     max_textures: int = 64
     max_parts: int = 100_000
+    max_node_visits: int = 400_000
     max_nesting: int = 32
+    max_vrml_tokens: int = 1_000_000
     thin_wall_samples: int = 4096
     max_ray_tests: int = 20_000_000
     max_pair_tests: int = 500_000_000

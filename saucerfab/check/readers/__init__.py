@@ -185,16 +185,24 @@ def _read_zip(p: Path, data: bytes, limits: Limits) -> MeshData:
 
 
 def _gunzip(raw: bytes, limits: Limits) -> bytes:
-    """Decompress with the output bounded (a gzip bomb stops at the limit)."""
-    out = io.BytesIO()
+    """Decompress with the output bounded as it streams (a gzip bomb stops at the budget, not at its end).
+
+    The budget is the archives' (:func:`~saucerfab.check.readers.safe.inflation_budget`):
+    ``Limits.max_uncompressed_bytes``, and past ``Limits.free_inflation_bytes``
+    at most ``Limits.max_inflation_ratio`` times the compressed size.
+    """
+    from saucerfab.check.readers.safe import inflation_budget
+
+    budget, reason = inflation_budget(limits, len(raw))
+    out = io.BytesIO()  # grows in place; getvalue() hands the buffer over without a copy
     try:
         with gzip.GzipFile(fileobj=io.BytesIO(raw)) as gz:
             while chunk := gz.read(1 << 20):
                 out.write(chunk)
-                if out.tell() > limits.max_uncompressed_bytes:
+                if out.tell() > budget:
                     raise ReadError(
                         "archive_too_large",
-                        f"the gzip file inflates past {limits.max_uncompressed_bytes:,} bytes (Limits.max_uncompressed_bytes)",
+                        f"the gzip file inflates past {budget:,} bytes (a gzip bomb?); limit: {reason}",
                     )
     except (OSError, EOFError, zlib.error) as exc:
         raise ReadError("truncated", f"the gzip data is damaged: {exc}") from None

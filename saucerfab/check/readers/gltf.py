@@ -3,9 +3,14 @@
 Every number in the JSON is the attacker's, so the reader type-checks each
 field it uses and bounds every accessor against its buffer view and every
 view against its buffer (offset + stride x (count - 1) + element size)
-before making an array. Node hierarchies are walked with a depth limit and
-cycle detection; instanced triangles count against the caps before arrays
-are made. Units are metres by the glTF specification.
+before making an array. Node hierarchies are priced before they are walked
+(memoised per node, so a node listed by several parents costs one step):
+instanced triangles, vertices, primitive instances and node visits count
+against the caps, with a depth limit and cycle detection, before any array
+is made; each mesh is decoded once however often it is instanced. Buffers
+naming the same URI share one read, and all of a file's buffer bytes
+together are bounded (``Limits.max_buffer_bytes``). Units are metres by the
+glTF specification.
 
 Colour: ``baseColorTexture`` via ``TEXCOORD_n``, ``COLOR_0`` vertex colours
 and ``baseColorFactor`` material colours.
@@ -17,6 +22,7 @@ import base64
 import binascii
 import json
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -63,6 +69,18 @@ def _item(seq: list[Any], i: int, what: str) -> dict[str, Any]:
     return _dict(seq[i], f"{what} {i}")
 
 
+@dataclass
+class _Prim:
+    """One triangle primitive of a mesh, decoded once however many nodes instance it."""
+
+    what: str
+    V: np.ndarray
+    F: np.ndarray
+    uv: np.ndarray | None
+    tex: np.ndarray | None
+    col: np.ndarray | None
+
+
 class _Gltf:
     def __init__(self, doc: Any, buffers: list[bytes | None], res: Resources, limits: Limits) -> None:
         self.doc = _dict(doc, "the glTF document")
@@ -71,6 +89,11 @@ class _Gltf:
         self.limits = limits
         self.b = MeshBuilder("glb", limits)
         self._buf_cache: dict[int, bytes] = {}
+        # buffers naming the same URI share one read; all URIs together are bounded by Limits.max_buffer_bytes
+        self._uri_cache: dict[str, bytes] = {}
+        self.buffer_bytes = 0
+        self._prims: dict[int, list[_Prim]] = {}
+        self.visits = 0
 
     # ---- data
     def buffer(self, i: int) -> bytes:
@@ -85,12 +108,25 @@ class _Gltf:
             if data is None:
                 raise _bad(f"buffer {i} has no uri and there is no GLB binary chunk for it")
         elif isinstance(uri, str):
-            data = self._uri_bytes(uri, self.limits.max_file_bytes, f"buffer {i}")
+            data = self._buffer_uri(uri, f"buffer {i}")
         else:
             raise _bad(f"buffer {i} uri is not a string")
         if len(data) < length:
             raise ReadError("truncated", f"glTF buffer {i} declares {length:,} bytes but has {len(data):,}")
         self._buf_cache[i] = data
+        return data
+
+    def _buffer_uri(self, uri: str, what: str) -> bytes:
+        """The bytes ``uri`` names: read once however many buffers name it, all URIs within one budget."""
+        if uri in self._uri_cache:
+            return self._uri_cache[uri]
+        left = self.limits.max_buffer_bytes - self.buffer_bytes
+        cap = min(self.limits.max_file_bytes, left)
+        if cap < self.limits.max_file_bytes:  # the file's budget binds: say so in any refusal
+            what = f"{what} (with {left:,} bytes left of Limits.max_buffer_bytes for all buffers)"
+        data = self._uri_bytes(uri, cap, what)
+        self.buffer_bytes += len(data)
+        self._uri_cache[uri] = data
         return data
 
     def _uri_bytes(self, uri: str, cap: int, what: str) -> bytes:
@@ -165,6 +201,8 @@ class _Gltf:
             for r in roots:
                 if not isinstance(r, int):
                     raise _bad("a scene lists a node that is not an index")
+            self._check_cost(nodes, roots)
+            for r in roots:
                 self._node(nodes, r, np.eye(4), 0, set())
         else:
             self.b.note("ignored_content", "glTF without scenes: every mesh was read once, untransformed")
@@ -172,7 +210,96 @@ class _Gltf:
                 self._mesh(meshes, mi, np.eye(4))
         return self.b.build(unit_mm=1000.0, units="meter", units_stated=True)
 
+    def _check_cost(self, nodes: list[Any], roots: list[int]) -> None:
+        """Refuse a scene whose instancing is over the caps, from node and accessor counts alone.
+
+        A node may be listed by several parents (against the glTF rules, but
+        exporters do it): each listing instances its whole subtree again, so
+        a tree whose every node lists the next twice doubles per level. The
+        cost of each node is memoised, so pricing takes one step per node
+        and child link however large the total, like the 3MF and VRML
+        readers' component and DEF/USE pricing.
+        """
+        memo: dict[int, tuple[int, int, int, int]] = {}
+        mesh_memo: dict[int, tuple[int, int, int]] = {}
+        tri = verts = parts = visits = 0
+        for r in roots:
+            t, v, p, n = self._node_cost(nodes, r, 0, set(), memo, mesh_memo)
+            tri, verts, parts, visits = tri + t, verts + v, parts + p, visits + n
+        lim = self.limits
+        if tri > lim.max_triangles or verts > lim.max_vertices or parts > lim.max_parts:
+            raise ReadError(
+                "over_check_limit",
+                f"the glTF scene instances {tri:,} triangles ({verts:,} vertices) in {parts:,} primitive instances "
+                f"(a node listed by several parents counts once per listing), over the checker's limits "
+                f"({lim.max_triangles:,} triangles, Limits.max_triangles / --max-triangles; {lim.max_vertices:,} "
+                f"vertices, Limits.max_vertices; {lim.max_parts:,} parts, Limits.max_parts)",
+            )
+        if visits > lim.max_node_visits:
+            raise ReadError(
+                "over_check_limit",
+                f"the glTF scene takes {visits:,} node visits to instance (a node listed by several parents is "
+                f"visited once per listing), over the checker's limit of {lim.max_node_visits:,} "
+                "(Limits.max_node_visits)",
+            )
+
+    def _node_cost(self, nodes: list[Any], i: int, depth: int, path: set[int],
+                   memo: dict[int, tuple[int, int, int, int]], mesh_memo: dict[int, tuple[int, int, int]],
+                   ) -> tuple[int, int, int, int]:
+        """(triangles, vertices, primitive instances, node visits) of node ``i``'s subtree, memoised."""
+        if i in memo:
+            return memo[i]
+        if depth > self.limits.max_nesting:
+            raise ReadError("over_check_limit", f"glTF nodes nest deeper than {self.limits.max_nesting} "
+                                                "(Limits.max_nesting)")
+        if i in path:
+            raise _bad(f"node {i} is its own ancestor (a cycle)")
+        n = _item(nodes, i, "node")
+        t = v = p = 0
+        if "mesh" in n:
+            mi = _int(n, "mesh", what=f"node {i}")
+            if mi not in mesh_memo:
+                mesh_memo[mi] = self._mesh_cost(mi)
+            t, v, p = mesh_memo[mi]
+        visits = 1
+        path.add(i)
+        for c in _list(n, "children"):
+            if not isinstance(c, int):
+                raise _bad(f"node {i} has a child that is not an index")
+            ct, cv, cp, cn = self._node_cost(nodes, c, depth + 1, path, memo, mesh_memo)
+            t, v, p, visits = t + ct, v + cv, p + cp, visits + cn
+        path.discard(i)
+        memo[i] = (t, v, p, visits)
+        return memo[i]
+
+    def _mesh_cost(self, mi: int) -> tuple[int, int, int]:
+        """(triangles, vertices, triangle primitives) one instance of mesh ``mi`` adds, from accessor counts."""
+        mesh = _item(_list(self.doc, "meshes"), mi, "mesh")
+        accessors = _list(self.doc, "accessors")
+        t = v = p = 0
+        for pi, prim in enumerate(_list(mesh, "primitives")):
+            what = f"glTF mesh {mi} primitive {pi}"
+            prim = _dict(prim, f"mesh {mi} primitive {pi}")
+            mode = _int(prim, "mode", 4, f"mesh {mi} primitive {pi}")
+            if mode not in (4, 5, 6):
+                continue
+            attrs = _dict(prim.get("attributes", {}), f"mesh {mi} primitive {pi} attributes")
+            if "POSITION" not in attrs:
+                raise _bad(f"mesh {mi} primitive {pi} has no POSITION")
+            nv = _int(_item(accessors, _int(attrs, "POSITION", what=what), "accessor"), "count", what=what)
+            n_idx = nv
+            if "indices" in prim:
+                n_idx = _int(_item(accessors, _int(prim, "indices", what=what), "accessor"), "count", what=what)
+            t += n_idx // 3 if mode == 4 else max(0, n_idx - 2)
+            v += nv
+            p += 1
+        return t, v, p
+
     def _node(self, nodes: list[Any], i: int, parent: np.ndarray, depth: int, path: set[int]) -> None:
+        self.visits += 1
+        if self.visits > self.limits.max_node_visits:  # priced in _check_cost; a second guard on the walk itself
+            raise ReadError("over_check_limit", f"the glTF scene takes over {self.limits.max_node_visits:,} node "
+                                                "visits (Limits.max_node_visits)")
         if depth > self.limits.max_nesting:
             raise ReadError("over_check_limit", f"glTF nodes nest deeper than {self.limits.max_nesting}")
         if i in path:
@@ -187,7 +314,23 @@ class _Gltf:
             self._node(nodes, c, M, depth + 1, path | {i})
 
     def _mesh(self, meshes: list[Any], mi: int, M: np.ndarray) -> None:
+        """One instance of mesh ``mi`` under transform ``M`` (its primitives decoded on first use)."""
+        prims = self._prims.get(mi)
+        if prims is None:
+            prims = self._decode_mesh(meshes, mi)
+            self._prims[mi] = prims
+        mirrored = np.linalg.det(M[:3, :3]) < 0
+        for pr in prims:
+            self.b.reserve(len(pr.V), len(pr.F), pr.what)
+            Vw = pr.V @ M[:3, :3].T + M[:3, 3]
+            F = pr.F[:, ::-1] if mirrored else pr.F  # mirrored instance: keep outward winding
+            uv = pr.uv[:, ::-1] if (mirrored and pr.uv is not None) else pr.uv
+            self.b.add(Vw, F, corner_uv=uv, face_texture=pr.tex, face_colour=pr.col, what=pr.what)
+
+    def _decode_mesh(self, meshes: list[Any], mi: int) -> list[_Prim]:
+        """The triangle primitives of mesh ``mi``, read and range-checked, in the mesh's own coordinates."""
         mesh = _item(meshes, mi, "mesh")
+        out: list[_Prim] = []
         for pi, prim in enumerate(_list(mesh, "primitives")):
             prim = _dict(prim, f"mesh {mi} primitive {pi}")
             mode = _int(prim, "mode", 4, f"mesh {mi} primitive {pi}")
@@ -216,9 +359,6 @@ class _Gltf:
                 bad = int(F.max()) if F.max() >= len(V) else int(F.min())
                 raise ReadError("index_out_of_range",
                                 f"{what}: index {bad} but the primitive has {len(V):,} positions")
-            Vw = V @ M[:3, :3].T + M[:3, 3]
-            if np.linalg.det(M[:3, :3]) < 0:
-                F = F[:, ::-1]  # mirrored instance: keep outward winding
             uv = tex = col = None
             mat = None
             if "material" in prim:
@@ -247,7 +387,8 @@ class _Gltf:
             elif mat is not None and "baseColorFactor" in pbr:
                 col = np.ones(len(F), dtype=bool)
                 self.b.colour_kinds.add("material")
-            self.b.add(Vw, F, corner_uv=uv, face_texture=tex, face_colour=col, what=what)
+            out.append(_Prim(what, V, F, uv, tex, col))
+        return out
 
     def _texture(self, ti: int) -> int:
         tex = _item(_list(self.doc, "textures"), ti, "texture")
@@ -266,13 +407,14 @@ class _Gltf:
                     return TextureInfo(name=name, status="unreadable", message=exc.message)
                 if len(view) > self.limits.max_texture_bytes:
                     return TextureInfo(name=name, status="too_large", message=f"glTF {name} is over {self.limits.max_texture_bytes:,} bytes")
-                return probe_texture(name, bytes(view), self.limits)
+                return probe_texture(name, bytes(view), self.limits, budget=self.res.budget)
             uri = img.get("uri")
             if not isinstance(uri, str):
                 return TextureInfo(name=name, status="missing", message=f"glTF {name} has neither bufferView nor uri")
             if uri.startswith("data:"):
                 try:
-                    return probe_texture(name, self._uri_bytes(uri, self.limits.max_texture_bytes, name), self.limits)
+                    return probe_texture(name, self._uri_bytes(uri, self.limits.max_texture_bytes, name), self.limits,
+                                         budget=self.res.budget)
                 except ReadError as exc:
                     return TextureInfo(name=name, status="unreadable", message=exc.message)
             return self.res.texture(uri)
@@ -366,6 +508,15 @@ def read_gltf(path: Path, data: bytes, limits: Limits, res: Resources | None = N
 def _load_json(raw: bytes, limits: Limits) -> Any:
     if len(raw) > limits.max_json_bytes:
         raise ReadError("over_check_limit", f"the glTF JSON is {len(raw):,} bytes, over Limits.max_json_bytes")
+    # every JSON value becomes a Python object (~50-100 bytes; 3-byte "{}," items make 25x their size):
+    # bound them by an upper count (containers and separators) before parsing
+    values = raw.count(b"{") + raw.count(b"[") + raw.count(b",")
+    if values > limits.max_json_values:
+        raise ReadError(
+            "over_check_limit",
+            f"the glTF JSON holds up to {values:,} values, over the checker's limit of {limits.max_json_values:,} "
+            "(Limits.max_json_values)",
+        )
     try:
         doc = json.loads(raw.decode("utf-8-sig"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:

@@ -1,11 +1,13 @@
 """Wavefront OBJ reader, with its MTL material library and textures.
 
-Statement lines are counted with ``bytes.count`` before any list of them is
-made, so a file of a billion ``v`` lines is refused by its count, not by
-running out of memory. The common layouts (every ``f`` a triangle with the
-same ``a/b/c`` form, positive indices) are read in bulk with numpy; anything
-else (polygons, negative indices, mixed forms, comments) takes a line-by-line
-path. Polygons are fan-triangulated in order.
+Statement lines are counted before any list of them is made, exactly as the
+parser will match them (any run of blanks may lead a line), so a file of a
+billion ``v`` lines is refused by its count, not by running out of memory.
+The common layouts (every ``f`` a triangle with the same ``a/b/c`` form,
+positive indices) are read in bulk with numpy; anything else (polygons,
+negative indices, mixed forms, comments) takes a line-by-line path, which
+range-checks each index as it reads it (0 is not an OBJ index). Polygons
+are fan-triangulated in order.
 
 Colour: ``map_Kd`` textures through ``vt`` coordinates, ``Kd`` material
 colours, and the common ``v x y z r g b`` vertex-colour extension. The MTL
@@ -45,13 +47,59 @@ class _Material:
     map_kd: str | None = None
 
 
-def _count_lines(data: bytes, keyword: bytes) -> int:
-    """Lines starting with ``keyword`` + space/tab (an upper bound: leading blanks are rare)."""
-    n = 0
-    for sep in (b" ", b"\t"):
-        n += data.count(b"\n" + keyword + sep) + (1 if data.startswith(keyword + sep) else 0)
-        n += data.count(b"\n " + keyword + sep) + data.count(b"\n\t" + keyword + sep)
-    return n
+_COUNT_CHUNK = 4 << 20
+
+
+def _count_lines(data: bytes, keyword: bytes, stop: int | None = None) -> int:
+    """Lines the parser reads as ``keyword`` statements: ``^[ \t]*keyword[ \t]``, exactly."""
+    return _count_statements(data, {keyword: stop})[keyword]
+
+
+def _count_statements(data: bytes, stops: dict[bytes, int | None]) -> dict[bytes, int]:
+    """How many lines the parser reads as each keyword's statements (``^[ \t]*keyword[ \t]``), exactly.
+
+    Without indented lines, ``bytes.count`` of the keyword after a newline
+    is exact and fast. Otherwise numpy counts in 4 MB slices, each ending
+    at a newline: a keyword followed by a blank counts when the last
+    non-blank before it is a newline (or nothing, at a slice's start, which
+    is a line's start). A regex would make a match object per line, five
+    times slower, and the old count of ``\n v`` missed lines led by two
+    blanks. Counting stops once a keyword is past its ``stop`` (the file is
+    refused then), so endless indented lines cost one limit's worth.
+    """
+    if b"\n " not in data and b"\n\t" not in data and data[:1] not in (b" ", b"\t"):
+        return {kw: sum(data.count(b"\n" + kw + sep) + (1 if data.startswith(kw + sep) else 0) for sep in (b" ", b"\t"))
+                for kw in stops}
+    counts = dict.fromkeys(stops, 0)
+    codes = {kw: np.frombuffer(kw, np.uint8) for kw in stops}
+    pos = 0
+    while pos < len(data):
+        end = data.rfind(b"\n", pos, pos + _COUNT_CHUNK) + 1 if pos + _COUNT_CHUNK < len(data) else len(data)
+        if end <= pos:  # one line longer than a slice: take it whole
+            nl = data.find(b"\n", pos + _COUNT_CHUNK)
+            end = len(data) if nl < 0 else nl + 1
+        a = np.frombuffer(data, np.uint8, count=end - pos, offset=pos)
+        blank = (a == 32) | (a == 9)
+        nonblank: np.ndarray | None = None
+        for kw, code in codes.items():
+            k = len(code)
+            if len(a) <= k:
+                continue
+            hit = blank[k:].copy()  # the keyword is followed by a blank...
+            for j in range(k):
+                hit &= a[j : len(a) - k + j] == code[j]
+            cand = np.flatnonzero(hit)
+            if not len(cand):
+                continue
+            if nonblank is None:
+                nonblank = np.flatnonzero(~blank)
+            before = np.searchsorted(nonblank, cand) - 1  # ...and only blanks lie between it and its line's start
+            prev = np.where(before >= 0, nonblank[np.maximum(before, 0)], -1)
+            counts[kw] += int(np.count_nonzero((prev < 0) | (a[np.maximum(prev, 0)] == 10)))
+        if any(stop is not None and counts[kw] > stop for kw, stop in stops.items()):
+            break
+        pos = end
+    return counts
 
 
 def _floats(payloads: list[bytes], what: str) -> tuple[np.ndarray, np.ndarray]:
@@ -78,7 +126,8 @@ def read_obj(path: Path, data: bytes, limits: Limits, res: Resources | None = No
     """Read an OBJ file's bytes; its MTL and textures come from ``res`` (default: beside ``path``)."""
     res = res or DiskResources(path.parent, limits)
     b = MeshBuilder("obj", limits)
-    nv, nvt, nf = _count_lines(data, b"v"), _count_lines(data, b"vt"), _count_lines(data, b"f")
+    counts = _count_statements(data, {b"v": limits.max_vertices, b"vt": limits.max_vertices, b"f": limits.max_triangles})
+    nv, nvt, nf = counts[b"v"], counts[b"vt"], counts[b"f"]
     b.reserve(nv, nf, "the OBJ")
     if nvt > limits.max_vertices:
         raise ReadError("over_check_limit", f"the OBJ has {nvt:,} 'vt' lines, over Limits.max_vertices")
@@ -179,7 +228,11 @@ def _faces(
         joined = b"\n".join(pay)
         if b"-" not in joined and re.fullmatch(rb"(?:" + one + rb"\n)*" + one, joined) is not None:
             per = {"v": 1, "v/t": 2, "v/t/n": 3, "v//n": 2}[form]
-            nums = np.array(joined.replace(b"//", b" ").replace(b"/", b" ").split(), dtype=np.int64)
+            try:
+                nums = np.array(joined.replace(b"//", b" ").replace(b"/", b" ").split(), dtype=np.int64)
+            except (OverflowError, ValueError):
+                # an index too large for int64 cannot be in range; the line-by-line path says which face
+                return _faces_slow(data, nv, nvt, limits)
             nums = nums.reshape(len(pay), k, per)
             j = np.arange(1, k - 1)
             corners = np.stack([np.zeros_like(j), j, j + 1], axis=1)  # fan: (0, j, j+1)
@@ -207,6 +260,26 @@ def _check_range(idx: np.ndarray, n: int, what: str) -> None:
 
 
 _SEQ = re.compile(rb"^[ \t]*(v|vt|f|usemtl)[ \t]+([^\r\n]*)", re.M)
+
+
+def _corner_index(text: bytes, seen: int, total: int, nface: int, what: str) -> int:
+    """The 0-based index an OBJ corner's ``text`` names, or raise ``index_out_of_range``.
+
+    OBJ counts from 1, and a negative index counts back from the last
+    ``what`` defined so far (``seen``); 0 is neither, and must not become
+    ``seen + 0`` - the next one, defined later. Indices beyond ``total`` (or
+    too large for an int64) are refused here, where the face is known,
+    instead of overflowing the array they would go into.
+    """
+    i = int(text)
+    j = i - 1 if i > 0 else seen + i
+    if i == 0 or not 0 <= j < total:
+        raise ReadError(
+            "index_out_of_range",
+            f"OBJ face {nface} refers to {what} {str(i)[:40]} but there are {total:,} "
+            "(OBJ indices count from 1; negative ones back from the last defined so far)",
+        )
+    return j
 
 
 def _faces_slow(data: bytes, nv_total: int, nvt_total: int, limits: Limits
@@ -243,12 +316,9 @@ def _faces_slow(data: bytes, nv_total: int, nvt_total: int, limits: Limits
         try:
             for c in corners:
                 parts = c.split(b"/")
-                a = int(parts[0])
-                a = a - 1 if a > 0 else nv + a  # negative: relative to the vertices so far
-                vi.append(a)
+                vi.append(_corner_index(parts[0], nv, nv_total, nface, "vertex"))
                 if len(parts) > 1 and parts[1]:
-                    t = int(parts[1])
-                    ti.append(t - 1 if t > 0 else nvt + t)
+                    ti.append(_corner_index(parts[1], nvt, nvt_total, nface, "texture coordinate"))
                 else:
                     ti.append(-1)
         except ValueError:

@@ -7,10 +7,14 @@ Each function checks a size or count before the work it bounds:
   directory size) before :mod:`zipfile` parses the directory; every entry
   name (absolute or ``..`` paths refuse the archive); and every extraction,
   read in chunks against a running uncompressed budget, because the sizes
-  in zip headers are the attacker's to choose.
-* :func:`probe_texture` - the image header's pixel count before decoding.
+  in zip headers are the attacker's to choose. The budget is the smaller of
+  ``Limits.max_uncompressed_bytes`` and an inflation ratio to the archive's
+  own size (:func:`inflation_budget`), so a bomb stops early.
+* :func:`probe_texture` - the image header's pixel count before decoding,
+  against the texture's limit and what is left of its file's
+  :class:`TextureBudget`.
 * :func:`parse_xml` - defusedxml with DTDs forbidden (so no entity
-  expansion, no external entities), after a size check.
+  expansion, no external entities), after a size and element-count check.
 """
 
 from __future__ import annotations
@@ -42,7 +46,8 @@ def read_file_bounded(path: Path, limit: int, what: str = "file") -> bytes:
         if size > limit:
             raise ReadError("over_check_limit", f"{what} is {size:,} bytes, over the checker's limit of {limit:,}")
         with open(path, "rb") as fh:
-            data = fh.read(limit + 1)
+            # read(n) allocates n bytes up front: ask for what the file holds (+1 to see it grow), not the limit
+            data = fh.read(min(size, limit) + 1)
     except ReadError:
         raise
     except OSError as exc:
@@ -86,6 +91,24 @@ _EOCD = b"PK\x05\x06"
 _EOCD64_LOC = b"PK\x06\x07"
 
 
+def inflation_budget(limits: Limits, packed: int) -> tuple[int, str]:
+    """(bytes a ``packed``-byte archive or gzip file may inflate to in total, why: the limit to name).
+
+    The absolute budget alone lets a 0.2 MB bomb hand the checker 256 MB to
+    hold and scan; real models deflate 4-10:1, so past a free allowance the
+    budget is also ``max_inflation_ratio`` times the compressed size.
+    """
+    absolute = limits.max_uncompressed_bytes
+    if limits.max_inflation_ratio > 0:
+        by_ratio = max(limits.free_inflation_bytes, int(limits.max_inflation_ratio * packed))
+        if by_ratio < absolute:
+            return by_ratio, (
+                f"{limits.max_inflation_ratio:g} times the {packed:,}-byte file (Limits.max_inflation_ratio; "
+                f"the first {limits.free_inflation_bytes:,} bytes are free, Limits.free_inflation_bytes)"
+            )
+    return absolute, "Limits.max_uncompressed_bytes"
+
+
 class SafeZip:
     """A zip archive opened with its entry count, names and sizes bounded.
 
@@ -94,7 +117,7 @@ class SafeZip:
 
     def __init__(self, data: bytes, limits: Limits) -> None:
         self.limits = limits
-        self.budget = limits.max_uncompressed_bytes
+        self.budget, self.budget_reason = inflation_budget(limits, len(data))
         self._check_eocd(data)
         try:
             self.zf = zipfile.ZipFile(io.BytesIO(data))
@@ -120,13 +143,13 @@ class SafeZip:
                 )
             self.names[info.filename.lower().lstrip("/")] = info
             declared += max(0, info.file_size)
-        if declared > limits.max_uncompressed_bytes:
+        if declared > self.budget:
             # headers can lie low (the bounded reads below catch that), and an
             # archive honestly this large is over the limit anyway: refuse early
             raise ReadError(
                 "archive_too_large",
-                f"the archive declares {declared:,} uncompressed bytes, over the checker's limit of "
-                f"{limits.max_uncompressed_bytes:,} (Limits.max_uncompressed_bytes)",
+                f"the archive declares {declared:,} uncompressed bytes, over the checker's budget of "
+                f"{self.budget:,}: {self.budget_reason}",
             )
 
     def _check_eocd(self, data: bytes) -> None:
@@ -166,20 +189,20 @@ class SafeZip:
         if info is None:
             raise ReadError("malformed", f"the archive has no entry {name!r}")
         limit = min(cap, self.budget)
-        out = bytearray()
+        # BytesIO grows in place and hands its buffer over without a copy: the entry is held once
+        out = io.BytesIO()
         try:
             with self.zf.open(info) as fh:
                 while True:
-                    chunk = fh.read(min(1 << 20, limit + 1 - len(out)))
+                    chunk = fh.read(min(1 << 20, limit + 1 - out.tell()))
                     if not chunk:
                         break
-                    out += chunk
-                    if len(out) > limit:
-                        kind = "archive_too_large"
+                    out.write(chunk)
+                    if out.tell() > limit:
                         raise ReadError(
-                            kind,
-                            f"{what} {info.filename!r} inflates past {limit:,} bytes (zip bomb?); limit "
-                            + ("Limits.max_uncompressed_bytes" if limit == self.budget else "for this entry"),
+                            "archive_too_large",
+                            f"{what} {info.filename!r} inflates past {limit:,} bytes (zip bomb?); limit: "
+                            + (self.budget_reason if limit == self.budget else f"{limit:,} bytes for this entry"),
                             where={"entry": info.filename},
                         )
         except ReadError:
@@ -190,20 +213,35 @@ class SafeZip:
             raise ReadError("unsupported_format", f"{what} {info.filename!r}: {exc}") from None
         except (zipfile.BadZipFile, OSError, EOFError, ValueError, struct.error, zlib.error) as exc:
             raise ReadError("truncated", f"{what} {info.filename!r} is damaged: {exc}") from None
-        self.budget -= len(out)
-        return bytes(out)
+        data = out.getvalue()
+        del out
+        self.budget -= len(data)
+        return data
 
 
 # -- XML --------------------------------------------------------------------
 
 
-def parse_xml(data: bytes, what: str, limit: int) -> Any:
-    """An ElementTree root from untrusted ``data``: defusedxml, DTDs forbidden, size bounded."""
+def parse_xml(data: bytes, what: str, limit: int, max_elements: int | None = None) -> Any:
+    """An ElementTree root from untrusted ``data``: defusedxml, DTDs forbidden, size and element count bounded.
+
+    ``max_elements`` bounds the tree by its number of ``<`` characters (an
+    upper bound on elements): a tree costs ~100-400 bytes per element, so
+    its byte size alone lets 4-byte ``<a/>`` elements take 25 times that.
+    """
     import defusedxml
     import defusedxml.ElementTree as DET
 
     if len(data) > limit:
         raise ReadError("over_check_limit", f"{what} is {len(data):,} bytes of XML, over the limit of {limit:,}")
+    if max_elements is not None:
+        tags = data.count(b"<")
+        if tags > max_elements:
+            raise ReadError(
+                "over_check_limit",
+                f"{what} has {tags:,} XML tags to parse into a tree, over the checker's limit of "
+                f"{max_elements:,} elements (Limits.max_xml_elements)",
+            )
     try:
         return DET.fromstring(data, forbid_dtd=True, forbid_entities=True, forbid_external=True)
     except (defusedxml.DTDForbidden, defusedxml.EntitiesForbidden, defusedxml.ExternalReferenceForbidden) as exc:
@@ -246,10 +284,42 @@ def header_size(data: bytes) -> tuple[str, int, int] | None:
     return None
 
 
-def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool = True) -> TextureInfo:
+class TextureBudget:
+    """What all of one file's textures may cost together: bytes read and pixels decoded.
+
+    The per-texture limits alone let a file name 64 textures at the largest
+    size each, 64 decodes of 1-2 s; every reader makes one budget per file
+    and charges each texture before reading or decoding it.
+    """
+
+    def __init__(self, limits: Limits) -> None:
+        self.bytes_left = limits.max_total_texture_bytes
+        self.pixels_left = limits.max_total_texture_pixels
+
+    def over_bytes(self, name: str, n: int) -> str | None:
+        """Charge ``n`` bytes read; the refusal message if they are over what is left."""
+        if n > self.bytes_left:
+            return (f"texture {name!r} is {n:,} bytes, over the {max(self.bytes_left, 0):,} left of the file's "
+                    "texture budget (Limits.max_total_texture_bytes); not read")
+        self.bytes_left -= n
+        return None
+
+    def over_pixels(self, name: str, w: int, h: int) -> str | None:
+        """Charge ``w`` x ``h`` pixels about to be decoded; the refusal message if over what is left."""
+        if w * h > self.pixels_left:
+            return (f"texture {name!r} is {w:,} x {h:,} pixels, over the {max(self.pixels_left, 0):,} pixels left of "
+                    "the file's texture budget (Limits.max_total_texture_pixels); not decoded")
+        self.pixels_left -= w * h
+        return None
+
+
+def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool = True,
+                  budget: TextureBudget | None = None) -> TextureInfo:
     """Check a texture safely: size in bytes, then pixels from the header, then decode.
 
-    Never raises for a bad image; the returned status says what was wrong.
+    ``budget`` is the file's :class:`TextureBudget` (None: only this texture's
+    own limits apply). Never raises for a bad image; the returned status
+    says what was wrong.
     """
     from PIL import Image, UnidentifiedImageError
 
@@ -261,7 +331,11 @@ def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool
         info.status = "too_large"
         info.message = f"texture {name!r} is {len(data):,} bytes, over the checker's limit of {limits.max_texture_bytes:,}"
         return info
+    if budget is not None and (msg := budget.over_bytes(name, len(data))) is not None:
+        info.status, info.message = "too_large", msg
+        return info
     head = header_size(data)
+    charged = False
     if head is not None:
         info.image_format, info.width, info.height = head
         if head[1] * head[2] > limits.max_texture_pixels:
@@ -271,6 +345,11 @@ def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool
                 f"{limits.max_texture_pixels:,} pixels (decompression bomb?); not decoded"
             )
             return info
+        if decode and budget is not None:
+            charged = True
+            if (msg := budget.over_pixels(name, head[1], head[2])) is not None:
+                info.status, info.message = "too_large", msg
+                return info
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # DecompressionBombWarning: we check pixels ourselves below
@@ -287,6 +366,10 @@ def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool
                     f"{limits.max_texture_pixels:,} pixels (decompression bomb?); not decoded"
                 )
                 return info
+            # charged here for a format header_size does not read (BMP, GIF...)
+            if decode and budget is not None and not charged and (msg := budget.over_pixels(name, w, h)) is not None:
+                info.status, info.message = "too_large", msg
+                return info
             if decode:
                 img.load()
                 if limits.keep_texture_pixels:
@@ -302,8 +385,8 @@ def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool
     return info
 
 
-def load_texture_file(base_dir: Path, ref: str, limits: Limits) -> TextureInfo:
-    """A texture named by a model file on disk (OBJ map_Kd, PLY TextureFile, VRML url)."""
+def load_texture_file(base_dir: Path, ref: str, limits: Limits, budget: TextureBudget | None = None) -> TextureInfo:
+    """A texture named by a model file on disk (OBJ map_Kd, PLY TextureFile, VRML url), charged to ``budget``."""
     p = resolve_beside(base_dir, ref)
     if p is None:
         return TextureInfo(
@@ -319,10 +402,12 @@ def load_texture_file(base_dir: Path, ref: str, limits: Limits) -> TextureInfo:
                 name=ref, status="too_large",
                 message=f"texture {ref!r} is {size:,} bytes, over the checker's limit of {limits.max_texture_bytes:,}",
             )
+        if budget is not None and size > budget.bytes_left:  # refuse before reading it (probe_texture charges it)
+            return TextureInfo(name=ref, status="too_large", message=str(budget.over_bytes(ref, size)))
         data = p.read_bytes()
     except OSError as exc:
         return TextureInfo(name=ref, status="unreadable", message=f"texture {ref!r} cannot be read: {exc.strerror}")
-    return probe_texture(ref, data, limits)
+    return probe_texture(ref, data, limits, budget=budget)
 
 
 def zip_join(base: str, ref: str) -> str | None:
@@ -352,7 +437,11 @@ class Resources:
 
     Readers ask for textures and side files by the name the model gives;
     every lookup is confined (no absolute paths, no ``..``) and bounded.
+    One instance serves one model file, and its ``budget`` bounds all of
+    that file's textures together.
     """
+
+    budget: TextureBudget
 
     def texture(self, ref: str) -> TextureInfo:
         """The texture named ``ref``, checked (never raises)."""
@@ -369,9 +458,10 @@ class DiskResources(Resources):
     def __init__(self, base_dir: Path, limits: Limits) -> None:
         self.base = base_dir
         self.limits = limits
+        self.budget = TextureBudget(limits)
 
     def texture(self, ref: str) -> TextureInfo:
-        return load_texture_file(self.base, ref, self.limits)
+        return load_texture_file(self.base, ref, self.limits, self.budget)
 
     def read(self, ref: str, cap: int, what: str) -> bytes:
         p = resolve_beside(self.base, ref)
@@ -389,6 +479,7 @@ class ZipResources(Resources):
         self.zf = zf
         self.entry = entry
         self.limits = limits
+        self.budget = TextureBudget(limits)
 
     def texture(self, ref: str) -> TextureInfo:
         target = zip_join(self.entry, ref)
@@ -402,7 +493,7 @@ class ZipResources(Resources):
         except ReadError as exc:
             return TextureInfo(name=ref, status="too_large" if exc.code == "archive_too_large" else "unreadable",
                                message=exc.message)
-        return probe_texture(ref, data, self.limits)
+        return probe_texture(ref, data, self.limits, budget=self.budget)
 
     def read(self, ref: str, cap: int, what: str) -> bytes:
         target = zip_join(self.entry, ref)

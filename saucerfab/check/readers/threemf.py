@@ -34,7 +34,7 @@ import numpy as np
 
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
-from saucerfab.check.readers.safe import SafeZip, parse_xml, probe_texture, zip_join
+from saucerfab.check.readers.safe import SafeZip, TextureBudget, parse_xml, probe_texture, zip_join
 
 NS_CORE = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
 NS_MAT = "http://schemas.microsoft.com/3dmanufacturing/material/2015/02"
@@ -347,6 +347,7 @@ class _Reader:
         self.marker_ns = "urn:saucerfab:check:block:" + secrets.token_hex(8)
         self._comp_cache: dict[tuple[str, int], list[tuple[_Part, int, np.ndarray]]] = {}
         self._cost_cache: dict[tuple[str, int], tuple[int, int, int]] = {}
+        self.tex_budget = TextureBudget(limits)  # all of the package's textures together
 
     # ---- parts
     def part(self, name: str) -> _Part:
@@ -359,7 +360,7 @@ class _Reader:
             raise ReadError("malformed", f"the 3MF has no model part {name!r}")
         raw = self.zf.read(name, self.limits.max_xml_bytes, "model part")
         skeleton, blocks = _fast_blocks(raw, self.marker_ns, self.limits)
-        root = parse_xml(skeleton, f"model part {name!r}", self.limits.max_xml_tree_bytes)
+        root = parse_xml(skeleton, f"model part {name!r}", self.limits.max_xml_tree_bytes, self.limits.max_xml_elements)
         if root.tag != _C + "model":
             raise ReadError("malformed", f"model part {name!r} has root <{root.tag}>, not a 3MF core <model>")
         p = _Part(name=name, unit=root.get("unit", "millimeter"))
@@ -601,7 +602,7 @@ class _Reader:
                 data = self.zf.read(target, self.limits.max_texture_bytes, "texture")
             except ReadError as exc:
                 return TextureInfo(name=path, status="too_large", message=exc.message)
-            return probe_texture(path, data, self.limits)
+            return probe_texture(path, data, self.limits, budget=self.tex_budget)
 
         return self.b.texture(path.lower(), load)
 

@@ -7,8 +7,12 @@ with ``DEF``/``USE`` sharing, ``Transform`` (translation, rotation, scale,
 scaleOrientation, center), ``Group``-like nodes, ``Switch`` and ``LOD``.
 Other geometry (Box, Sphere, ElevationGrid...), ``PROTO`` instances and
 ``Inline`` are skipped with a warning. Bulk number arrays (``point [...]``,
-``coordIndex [...]``) are read with numpy; other tokens are counted and
-capped so a file of endless tokens ends quickly.
+``coordIndex [...]``) are read with numpy in slices of 256 kB, counted
+against the caps as they go (never one Python string per number of the
+whole array); other tokens are counted and capped (``Limits.max_vrml_tokens``)
+so a file of endless tokens ends quickly, and runs of blanks are skipped
+without being copied. Instancing (DEF/USE) is priced per node before the
+walk: triangles, shapes and node visits (``Limits.max_node_visits``).
 
 Units: VRML97 nominally uses metres, but colour-printer software (ZPrint,
 GrabCAD) reads VRML in millimetres, so the checker assumes millimetres and
@@ -28,10 +32,14 @@ from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
 from saucerfab.check.readers.safe import DiskResources, Resources
 
-_TOKEN = re.compile(r'[ \t\r\n,]+|#[^\n\r]*|"(?:[^"\\]|\\.)*"|[{}\[\]]|[^ \t\r\n,{}\[\]"#]+')
+# blanks, commas and comments between tokens are skipped without taking their text (a bomb of spaces
+# is one run, and copying it would double the file in memory); one match per token, the token in group 1
+_SKIP = re.compile(r"(?:[ \t\r\n,]+|#[^\n\r]*)+")
+_LEX = re.compile(r'(?:[ \t\r\n,]+|#[^\n\r]*)*("(?:[^"\\]|\\.)*"|[{}\[\]]|[^ \t\r\n,{}\[\]"#]+)?')
 _NUMERIC_ARRAY = re.compile(r"[0-9eE.+\- \t\r\n,]*")
 _NUMBER = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?|0[xX][0-9a-fA-F]+")
-MAX_TOKENS = 5_000_000
+_SEPARATOR = re.compile(r"[ \t\r\n,]")
+_ARRAY_SLICE = 1 << 18  # characters of a number array converted at a time
 _GROUPS = {"Group", "Transform", "Anchor", "Billboard", "Collision"}
 _SKIPPED_GEOMETRY = {"Box", "Sphere", "Cylinder", "Cone", "ElevationGrid", "Extrusion", "Text", "PointSet", "IndexedLineSet"}
 
@@ -54,21 +62,19 @@ class _Parser:
 
     # ---- tokens
     def _next_raw(self) -> str | None:
-        text = self.text
-        while self.pos < len(text):
-            m = _TOKEN.match(text, self.pos)
-            if m is None:
-                raise ReadError("malformed", f"VRML: unexpected character at offset {self.pos}")
+        m = _LEX.match(self.text, self.pos)  # always matches: everything in it is optional
+        if m is not None:
             self.pos = m.end()
-            tok = m.group()
-            c = tok[0]
-            if c in " \t\r\n," or c == "#":
-                continue
-            self.tokens += 1
-            if self.tokens > MAX_TOKENS:
-                raise ReadError("over_check_limit", f"VRML: more than {MAX_TOKENS:,} tokens outside number arrays")
-            return tok
-        return None
+        tok = m.group(1) if m is not None else None
+        if tok is None:
+            if self.pos >= len(self.text):
+                return None
+            raise ReadError("malformed", f"VRML: unexpected character at offset {self.pos}")
+        self.tokens += 1
+        if self.tokens > self.limits.max_vrml_tokens:
+            raise ReadError("over_check_limit", f"VRML: more than {self.limits.max_vrml_tokens:,} tokens outside "
+                                                "number arrays (Limits.max_vrml_tokens)")
+        return tok
 
     def peek(self) -> str | None:
         if self._peeked is None:
@@ -199,12 +205,9 @@ class _Parser:
 
     def _node_follows(self) -> bool:
         # look past the peeked word without consuming: a node type is followed by '{'
-        m = _TOKEN.match(self.text, self.pos)
-        pos = self.pos
-        while m is not None and (m.group()[0] in " \t\r\n," or m.group()[0] == "#"):
-            pos = m.end()
-            m = _TOKEN.match(self.text, pos)
-        return m is not None and m.group() == "{"
+        skip = _SKIP.match(self.text, self.pos)
+        pos = skip.end() if skip is not None else self.pos
+        return self.text.startswith("{", pos)
 
     def _list(self, depth: int) -> Any:
         self.expect("[")
@@ -212,10 +215,7 @@ class _Parser:
         m = _NUMERIC_ARRAY.match(self.text, self.pos)
         if m is not None and m.end() < len(self.text) and self.text[m.end()] == "]":
             self.pos = m.end() + 1
-            try:
-                return np.array(m.group().replace(",", " ").split(), dtype=np.float64)
-            except ValueError:
-                raise ReadError("malformed", "VRML: a number array holds something that is not a number") from None
+            return self._numbers(m.start(), m.end())
         items: list[Any] = []
         while True:
             t = self.peek()
@@ -235,6 +235,42 @@ class _Parser:
                 self.next()
             else:
                 items.append(self.node(depth + 1))
+
+
+    def _numbers(self, start: int, end: int) -> np.ndarray:
+        """The numbers in ``text[start:end]`` (blanks and commas only between them), a slice at a time.
+
+        Converting the whole array at once made one Python string per number
+        (~50 bytes each, 25 times the text for "10 10 10 ..."); slices cut at
+        a separator keep that to a slice's worth, and the running count
+        refuses an array longer than any the limits allow before converting
+        the rest.
+        """
+        lim = self.limits
+        cap = max(3 * lim.max_vertices, 4 * lim.max_triangles)  # points (x, y, z) or 'a b c -1' indices
+        text = self.text
+        parts: list[np.ndarray] = []
+        n = 0
+        pos = start
+        while pos < end:
+            stop = end
+            if pos + _ARRAY_SLICE < end:
+                sep = _SEPARATOR.search(text, pos + _ARRAY_SLICE, end)  # never cut a number in two
+                stop = sep.start() if sep is not None else end
+            piece = text[pos:stop].replace(",", " ").split()
+            n += len(piece)
+            if n > cap:
+                raise ReadError(
+                    "over_check_limit",
+                    f"VRML: a number array holds over {cap:,} numbers, more than the checker's limits allow "
+                    "(3 x Limits.max_vertices coordinates, 4 x Limits.max_triangles indices)",
+                )
+            try:
+                parts.append(np.array(piece, dtype=np.float64))
+            except ValueError:
+                raise ReadError("malformed", "VRML: a number array holds something that is not a number") from None
+            pos = stop
+        return np.concatenate(parts) if parts else np.zeros(0)
 
 
 def _unquote(tok: str) -> str:
@@ -289,24 +325,24 @@ class _Walker:
         self.b = MeshBuilder("wrl", limits)
         self.visits = 0
 
-    def cost(self, node: Any, memo: dict[int, tuple[int, int]], depth: int = 0) -> tuple[int, int]:
-        """(triangles, shapes) walking ``node`` would instance; memoised per node, so USE fan-outs are cheap."""
+    def cost(self, node: Any, memo: dict[int, tuple[int, int, int]], depth: int = 0) -> tuple[int, int, int]:
+        """(triangles, shapes, node visits) walking ``node`` would take; memoised per node, so USE fan-outs are cheap."""
         if not isinstance(node, Node):
-            return (0, 0)
+            return (0, 0, 0)
         key = id(node)
         if key in memo:
             return memo[key]
         if depth > self.limits.max_nesting:
             raise ReadError("over_check_limit", "VRML scene graph nests too deeply (Limits.max_nesting)")
         t = node.type
-        total = (0, 0)
+        total = (0, 0, 1)
         if t == "Shape":
             geo = node.fields.get("geometry")
             if isinstance(geo, Node) and geo.type == "IndexedFaceSet":
                 ci = geo.fields.get("coordIndex")
                 n = len(ci) if isinstance(ci, (list, np.ndarray)) else 0
                 minus = int(np.count_nonzero(np.asarray(ci) == -1)) if n else 0
-                total = (max(0, n - 3 * minus), 1)
+                total = (max(0, n - 3 * minus), 1, 1)
         else:
             kids: list[Any] = []
             if t in _GROUPS:
@@ -319,17 +355,18 @@ class _Walker:
             elif t == "LOD":
                 kids = _children(node.fields.get("level"))[:1]
             for c in kids:
-                a, b = self.cost(c, memo, depth + 1)
-                total = (total[0] + a, total[1] + b)
+                a, b, v = self.cost(c, memo, depth + 1)
+                total = (total[0] + a, total[1] + b, total[2] + v)
         memo[key] = total
         return total
 
     def walk(self, node: Any, M: np.ndarray, depth: int) -> None:
         if not isinstance(node, Node):
             return
-        self.visits += 1
-        if self.visits > self.limits.max_parts * 4 or depth > self.limits.max_nesting:
-            raise ReadError("over_check_limit", "VRML scene graph too large or too deep (Limits.max_parts/max_nesting)")
+        self.visits += 1  # priced before the walk; this guards the walk itself
+        if self.visits > self.limits.max_node_visits or depth > self.limits.max_nesting:
+            raise ReadError("over_check_limit", "VRML scene graph too large or too deep "
+                                                "(Limits.max_node_visits/max_nesting)")
         t = node.type
         if t == "Shape":
             self.shape(node, M)
@@ -493,16 +530,22 @@ def read_vrml(path: Path, data: bytes, limits: Limits, res: Resources | None = N
     w = _Walker(res or DiskResources(path.parent, limits), limits)
     if p.protos:
         w.b.note("ignored_content", "VRML PROTO definitions were skipped; their instances are not checked")
-    memo: dict[int, tuple[int, int]] = {}
-    tri = shapes = 0
+    memo: dict[int, tuple[int, int, int]] = {}
+    tri = shapes = visits = 0
     for r in roots:
-        a, b = w.cost(r, memo)
-        tri, shapes = tri + a, shapes + b
+        a, b, v = w.cost(r, memo)
+        tri, shapes, visits = tri + a, shapes + b, visits + v
     if tri > limits.max_triangles or shapes > limits.max_parts:
         raise ReadError(
             "over_check_limit",
             f"the VRML scene instances about {tri:,} triangles in {shapes:,} shapes (DEF/USE), over the checker's "
             f"limits (Limits.max_triangles / --max-triangles, Limits.max_parts)",
+        )
+    if visits > limits.max_node_visits:
+        raise ReadError(
+            "over_check_limit",
+            f"the VRML scene takes {visits:,} node visits to instance (DEF/USE), over the checker's limit of "
+            f"{limits.max_node_visits:,} (Limits.max_node_visits)",
         )
     for r in roots:
         w.walk(r, np.eye(4), 0)
