@@ -5,6 +5,9 @@ renamed into place once complete, so a crash or Ctrl-C never leaves a
 half-written file or folder behind. ``os.replace`` is atomic on POSIX and
 Windows when source and destination are on the same file system, which is
 why the temporary lives beside the destination.
+
+:func:`exclusive_lock` keeps two writers (two batches on one output folder,
+two exports into one folder) from interleaving: the second fails at once.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ import contextlib
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 
@@ -91,3 +94,58 @@ def atomic_dir(path: str | os.PathLike[str], *, overwrite: bool = True) -> Itera
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+@contextlib.contextmanager
+def exclusive_lock(
+    path: str | os.PathLike[str], busy: Callable[[], BaseException], *, remove: bool = False
+) -> Iterator[None]:
+    """Hold an exclusive advisory lock on the file ``path`` (created) for the ``with`` block.
+
+    The lock is ``flock`` on the open file, so the kernel frees it when its
+    holder dies, even on ``kill -9``: a stale lock file never blocks anyone.
+    A second holder, in this process or another, does not wait: ``busy()``
+    is raised at once.
+
+    Args:
+        path: the lock file; its folder must exist.
+        busy: makes the error to raise when another holder has the lock.
+        remove: delete the lock file when done (for a lock beside a user's
+            folder, where it would be litter). Safe: a holder that locked
+            the file just as it was unlinked sees that it holds a file that
+            is gone and takes the lock again on the new one.
+
+    On a system without ``fcntl`` (Windows) nothing is locked: one writer per
+    folder is then the user's to keep.
+    """
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    path = Path(path)
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise busy() from None
+        except BaseException:
+            os.close(fd)
+            raise
+        try:
+            now = os.stat(path)
+        except FileNotFoundError:
+            now = None
+        held = os.fstat(fd)
+        if now is not None and (now.st_dev, now.st_ino) == (held.st_dev, held.st_ino):
+            break
+        os.close(fd)  # the previous holder removed the file under us: lock the one there now
+    try:
+        yield
+    finally:
+        if remove:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(path)  # while still holding the lock, so nobody else is mid-check on it
+        os.close(fd)

@@ -13,11 +13,14 @@ Grid convention (used everywhere in saucerfab):
 
 Heights are in model units. Base shapes are built with z >= 0 (the saucer's
 lowest point sits on the base plane) and a modest amplitude; a user shape is
-scaled by ``height_scale`` model units per unit of the file's values.
+scaled by ``height_scale`` model units per unit of the file's values, and its
+heights must then lie within ``MAX_RELIEF_PER_SIZE`` times the saucer's larger
+side of zero (:func:`check_height_range`).
 """
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -30,6 +33,14 @@ from saucerfab.scene import Saucer
 
 #: the largest shape file we parse (pixels of a PNG / elements of a .npy)
 MAX_SHAPE_PIXELS = 4096 * 4096
+#: a shape file's heights (after ``height_scale``) must lie within this many
+#: times the saucer's larger side of z = 0. Far above any printable relief
+#: (at the paper's scale a printer's build volume ends near 2 model units,
+#: and the export refuses more), it is there for files in the wrong unit:
+#: the design works in float32, which loses a 1/150 grid step beside heights
+#: over about 1e5 units and overflows at 3.4e38 (a "starting point must be
+#: strictly feasible" or "view axis is vertical" deep in the optimizer).
+MAX_RELIEF_PER_SIZE = 100.0
 
 
 @dataclass(frozen=True)
@@ -214,12 +225,58 @@ def _load_npy(path: Path) -> np.ndarray:
         raise ShapeError(f"cannot read shape file {str(path)!r}: {exc}") from None
 
 
+def check_height_scale(height_scale: float) -> None:
+    """Refuse a ``height_scale`` that is not a positive, finite number.
+
+    Raises:
+        ShapeError: zero, negative, NaN, infinite or not a number.
+    """
+    if (
+        isinstance(height_scale, bool)
+        or not isinstance(height_scale, (int, float, np.floating, np.integer))
+        or not math.isfinite(height_scale)
+        or height_scale <= 0
+    ):
+        raise ShapeError(
+            f"height_scale must be a positive number (model units per unit of the shape file's values), "
+            f"got {height_scale!r}"
+        )
+
+
+def allowed_height(saucer: Saucer | None = None) -> float:
+    """The largest |height| a shape file may give, model units: :data:`MAX_RELIEF_PER_SIZE`
+    times the larger side of ``saucer`` (default: the paper's 1 x 1 saucer)."""
+    return MAX_RELIEF_PER_SIZE * max((saucer or Saucer()).size)
+
+
+def check_height_range(heights: np.ndarray, what: str, height_scale: float, saucer: Saucer | None = None) -> None:
+    """Refuse heights (model units, finite) outside +-:func:`allowed_height` of z = 0.
+
+    Raises:
+        ShapeError: naming the range found and the range allowed.
+    """
+    limit = allowed_height(saucer)
+    lo, hi = float(np.min(heights)), float(np.max(heights))
+    if -limit <= lo and hi <= limit:
+        return
+    size = saucer or Saucer()
+    w, d = size.size
+    raise ShapeError(
+        f"shape file {what} gives heights from {lo:.4g} to {hi:.4g} model units (its values times "
+        f"height_scale {height_scale:g}); a saucer of {w:g} x {d:g} units takes heights within "
+        f"+-{limit:g} ({MAX_RELIEF_PER_SIZE:g} times its larger side; a printable relief is far "
+        "lower). Is the file in another unit? Give values of about [0, 1] (a 16-bit PNG's range), "
+        "or a smaller height_scale (--height-scale)"
+    )
+
+
 def load_shape(
     source: str | os.PathLike[str],
     n: int,
     *,
     height_scale: float = 0.1,
     seed: int = 0,
+    saucer: Saucer | None = None,
 ) -> np.ndarray:
     """Load a base shape as (n, n) heights in model units.
 
@@ -231,10 +288,14 @@ def load_shape(
         height_scale: model units per unit of the file's values (0.1: the
             artists' saucers rise a few times the height bound delta).
         seed: seed for the seeded shapes.
+        saucer: the saucer the shape is for; a file's heights must lie within
+            :func:`allowed_height` of it (default: the paper's saucer).
 
     Raises:
-        ShapeError: unknown name, unreadable file, wrong dimensionality, NaN.
+        ShapeError: unknown name, unreadable file, wrong dimensionality, NaN,
+            heights out of range, a bad ``height_scale``.
     """
+    check_height_scale(height_scale)  # before any reading: a bad option is refused at once
     text = os.fspath(source)
     path = Path(text)
     if path.suffix.lower() not in (".png", ".npy"):
@@ -252,9 +313,10 @@ def load_shape(
     if not np.isfinite(raw).all():
         bad = int((~np.isfinite(raw)).sum())
         raise ShapeError(f"shape file {text!r} holds {bad} NaN or infinite value(s); fix or fill them")
-    if not np.isfinite(height_scale) or height_scale <= 0:
-        raise ShapeError(f"height_scale must be a positive number, got {height_scale}")
-    return resample(raw * height_scale, n)
+    with np.errstate(over="ignore"):  # 1e300 x 10 is inf: reported as out of range below
+        scaled = raw * float(height_scale)
+    check_height_range(scaled, repr(text), float(height_scale), saucer)
+    return resample(scaled, n)
 
 
 # --------------------------------------------------------------------------- mesh

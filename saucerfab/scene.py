@@ -35,6 +35,8 @@ Vec3 = tuple[float, float, float]
 #: resolutions we accept; outside them memory or quality make no sense
 MIN_IMAGE_SIZE, MAX_IMAGE_SIZE = 8, 4096
 MIN_GRID, MAX_GRID = 4, 1024
+#: least sine of a view axis's angle to the vertical (see Scene.__post_init__)
+MIN_VIEW_TILT = 1e-9
 
 
 def _finite(name: str, *values: float) -> None:
@@ -344,6 +346,20 @@ class Scene:
                 f"the camera {self.camera} stands inside the cup's footprint; "
                 "move it outside (the paper uses (0, -5.5, 5))"
             )
+        for name, view in views:
+            # A look-at camera takes its "up" from the world's z: on a vertical
+            # view axis that is undefined (the renderer would fail much later,
+            # deep in a design or a verify). The bound is above the renderer's
+            # own (1e-12), so whatever it would refuse is refused here. (After
+            # the camera-in-cup check: a camera over the cup is the real mistake.)
+            axis = np.array(view.target) - cam
+            if float(np.hypot(axis[0], axis[1])) / float(np.linalg.norm(axis)) < MIN_VIEW_TILT:
+                raise ConfigError(
+                    f"the {name} view axis, from the camera {self.camera} to its target {view.target}, "
+                    "is vertical; a view's up direction is then undefined. Move the target (or the "
+                    "camera) sideways so the two are not on one vertical line (the paper looks down "
+                    "at about 45 degrees)"
+                )
         # The saucer may not overlap the cup: test the footprint rectangle
         # densely against the cup (exact for circles, conservative enough for
         # the others at this sampling), then the cup outline against the box.
@@ -526,6 +542,11 @@ def load_scene(source: str | os.PathLike[str]) -> Scene:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"scene file {str(path)!r} is not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib parses nested arrays recursively: a hostile file exhausts the stack
+        raise ConfigError(
+            f"scene file {str(path)!r} nests arrays or tables too deeply to be read; a scene is a few "
+            "tables of numbers and short lists"
+        ) from None
     return scene_from_dict(data)
 
 

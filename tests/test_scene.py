@@ -242,3 +242,31 @@ def test_with_changes_validates_again() -> None:
         s.with_changes(camera=(0.0, 0.0, 2.0))
     assert replace(s, cup=PrismCup(6, 0.45)).cup_width_units == pytest.approx(0.9)
     assert replace(s, cup=EllipseCup((0.45, 0.3))).cup_width_units == pytest.approx(0.9)
+
+
+# --------------------------------------------------------------------------- issue 16: view axes, deep files
+
+
+@pytest.mark.parametrize("view", ["direct", "reflected", "reflected2"])
+def test_a_vertical_view_axis_is_a_config_error_when_the_scene_loads(tmp_path: Path, view: str) -> None:
+    """A target straight below (or above) the camera leaves the view's up direction
+    undefined; it used to load and fail later as a ValueError deep in a render."""
+    path = tmp_path / "vertical.toml"
+    path.write_text(f"camera = [0.0, -5.5, 5.0]\n\n[{view}]\ntarget = [0.0, -5.5, -0.8]\nviewing_angle_deg = 3.0\n")
+    with pytest.raises(ConfigError, match=f"the {view} view axis.*is vertical") as exc:
+        load_scene(path)
+    assert "Move the target" in str(exc.value)
+    with pytest.raises(ConfigError, match="vertical"):
+        replace(paper_scene(), camera=(0.0, -5.5, 5.0), direct=ViewFrame((0.0, -5.5, 9.0), 4.5, 64))
+    # a hair off the vertical is a valid (if odd) view, as the renderer sees it
+    from saucerfab.render.camera import Camera
+
+    tilted = replace(paper_scene(), direct=ViewFrame((1e-6, -5.5, -0.8), 4.5, 64))
+    Camera.from_scene(tilted, "direct").axes()
+
+
+def test_a_deeply_nested_scene_file_is_a_config_error(tmp_path: Path) -> None:
+    path = tmp_path / "deep.toml"
+    path.write_text("camera = " + "[" * 5000 + "]" * 5000 + "\n")
+    with pytest.raises(ConfigError, match="too deeply"):
+        load_scene(path)

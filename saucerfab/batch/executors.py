@@ -15,6 +15,7 @@ An engine has ``slots`` (how many jobs to keep in flight), ``submit``,
 from __future__ import annotations
 
 import concurrent.futures as cf
+import logging
 import multiprocessing as mp
 import os
 import queue
@@ -187,6 +188,67 @@ def _worker_version() -> str:
     return saucerfab.__version__
 
 
+#: loggers of Dask (and of tornado, its event loop) that the driver silences
+#: while a batch runs on a cluster; see :class:`QuietDaskLogs`
+DASK_LOGGERS = ("distributed", "tornado")
+#: cancellation reasons of a Dask future that mean the driver lost the
+#: scheduler, not that a worker died (distributed's own words)
+SCHEDULER_GONE = ("scheduler-connection-lost", "scheduler-restart")
+
+
+#: pauses before each further try to send a job to the cluster (about 30 s in all: a
+#: killed worker is noticed by the scheduler within a second on a local
+#: network; a scatter to it fails until then)
+SUBMIT_PAUSES_S = (0.1, 0.3, 1.0, 3.0, 10.0, 15.0)
+
+
+#: seconds the driver waits for the cluster's size, and for the client to close
+SLOTS_TIMEOUT_S = 5.0
+CLOSE_TIMEOUT_S = 10.0
+#: a scatter may take this long, plus the payload's bytes at the rate below
+SCATTER_TIMEOUT_S = 10.0
+SCATTER_MIN_BYTES_PER_S = 20e6
+
+
+class _Unsent:
+    """The handle of a job the cluster did not take (see :meth:`DaskEngine.submit`)."""
+
+    def __init__(self, job_id: str) -> None:
+        self.job_id = job_id
+
+
+class QuietDaskLogs:
+    """Keep Dask's own log records (and their tracebacks) off the user's terminal.
+
+    Dask's client logs to stderr when the scheduler goes away or a worker
+    dies ("Removing worker ... caused the cluster to lose scattered data",
+    reconnect attempts, tracebacks of its callbacks). The batch reports each
+    of those in its own words (the job is run again, or failed with the
+    reason), so during a batch the records are dropped: every existing
+    ``distributed.*`` and ``tornado.*`` logger is raised above CRITICAL (a
+    logger made later inherits that from its parent), and :meth:`restore`
+    puts each level back.
+    """
+
+    def __init__(self) -> None:
+        self._saved: list[tuple[logging.Logger, int]] = []
+
+    def silence(self) -> None:
+        """Raise every Dask logger above CRITICAL (after ``distributed`` is imported:
+        its import configures them)."""
+        names = {n for n in logging.root.manager.loggerDict if n.split(".")[0] in DASK_LOGGERS}
+        for name in sorted(names | set(DASK_LOGGERS)):
+            lg = logging.getLogger(name)
+            self._saved.append((lg, lg.level))
+            lg.setLevel(logging.CRITICAL + 1)
+
+    def restore(self) -> None:
+        """Put back the levels :meth:`silence` changed."""
+        for lg, level in reversed(self._saved):
+            lg.setLevel(level)
+        self._saved.clear()
+
+
 class DaskEngine:
     """Jobs as tasks on an existing Dask distributed cluster (``tcp://HOST:PORT``).
 
@@ -194,11 +256,21 @@ class DaskEngine:
     result (with the output bytes) comes back to this driver, which writes it:
     workers need saucerfab of the same version, not the driver's files.
     Stage events travel as worker events (``log_event`` / ``subscribe_topic``).
-    A worker that dies is handled by the scheduler (the task is retried
-    elsewhere up to its ``allowed-failures``); a job it gives up on is
-    started once more, then recorded as failed. In a worker process with
-    several threads, designs run one at a time (see ``jobs._DESIGN_LOCK``);
-    one thread per worker process (``--nthreads 1``) uses a machine best.
+
+    A worker process that dies (killed, out of memory) costs no job: its
+    jobs come back as :data:`WORKER_DIED` and the driver starts each once
+    more (``runner.MAX_ATTEMPTS``, as for the local pool), with its payload
+    scattered again. Two ways lead there: the scheduler gives up on a task
+    that killed workers (``KilledWorker``, after its ``allowed-failures``), or,
+    far more often, the dead worker held the job's scattered payload, which
+    nothing can recompute, so the scheduler cancels the task. A cancellation
+    because this driver lost the scheduler (it died or restarted) is not a
+    worker's death: those jobs fail with that reason (rerun to resume).
+
+    Dask's own log lines are kept off the terminal while the engine is open
+    (:class:`QuietDaskLogs`). In a worker process with several threads,
+    designs run one at a time (see ``jobs._DESIGN_LOCK``); one thread per
+    worker process (``--nthreads 1``) uses a machine best.
     """
 
     scratch_in_output = False
@@ -215,8 +287,18 @@ class DaskEngine:
         self.address = address
         self.threads = threads
         self.name = f"Dask cluster {address}"
+        self._quiet = QuietDaskLogs()
+        self._quiet.silence()
         try:
-            self.client = Client(address, timeout=connect_timeout, set_as_default=False)
+            self._connect(Client, address, connect_timeout)
+        except BaseException:
+            self._quiet.restore()
+            raise
+
+    def _connect(self, client_cls: Any, address: str, connect_timeout: float) -> None:
+        """Connect, wait for a worker, check the workers' saucerfab version, subscribe to events."""
+        try:
+            self.client = client_cls(address, timeout=connect_timeout, set_as_default=False)
         except (OSError, TimeoutError) as exc:
             raise ConfigError(
                 f"cannot reach the Dask scheduler at {address!r} ({exc}); is it running and reachable?"
@@ -241,6 +323,7 @@ class DaskEngine:
         self._slots = 2
         self._scattered: dict[Any, Any] = {}
         self._finished: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._unsent: list[tuple[_Unsent, str]] = []
 
     def _on_event(self, event: Any) -> None:
         try:
@@ -252,26 +335,69 @@ class DaskEngine:
     @property
     def slots(self) -> int:
         now = time.monotonic()
-        if now - self._slots_at > 5.0:
+        if now - self._slots_at > 5.0 and self.client.status == "running":
             try:
-                self._slots = max(2, 2 * sum(self.client.nthreads().values()))
+                # bounded: a scheduler that has just died would hold the call for
+                # the client's whole reconnect timeout (30 s)
+                self._slots = max(2, 2 * sum(self.client.nthreads(callback_timeout=SLOTS_TIMEOUT_S).values()))
             except Exception:  # noqa: BLE001 - keep the last known size
                 pass
             self._slots_at = now
         return self._slots
 
     def submit(self, payload: Payload) -> Any:
+        """Scatter the payload and submit its task; a job that cannot be sent comes
+        back from :meth:`wait` as a failure (the batch goes on with the others)."""
         from saucerfab.batch.jobs import execute as run
 
         payload.event_topic = self.topic
         payload.scratch_root = None
-        data = self.client.scatter(payload, hash=False)
-        fut = self.client.submit(run, data, key=f"saucerfab-job-{payload.job_id}-{uuid.uuid4().hex[:8]}", pure=False)
-        self._scattered[fut.key] = data
-        fut.add_done_callback(self._finished.put)
-        return fut
+        error: Exception | None = None
+        # a scatter to a scheduler that has just died waits for the client to
+        # reconnect (up to its connect timeout); bound it by what the bytes need
+        size = sum(len(b) for b in payload.files.values())
+        timeout = SCATTER_TIMEOUT_S + size / SCATTER_MIN_BYTES_PER_S
+        for pause in (0.0, *SUBMIT_PAUSES_S):
+            if pause:
+                time.sleep(pause)
+            if self.client.status != "running":
+                break  # the scheduler is gone (the client is reconnecting or closed): fail the job now
+            try:
+                data = self.client.scatter(payload, hash=False, timeout=timeout)
+                fut = self.client.submit(
+                    run, data, key=f"saucerfab-job-{payload.job_id}-{uuid.uuid4().hex[:8]}", pure=False
+                )
+            except Exception as exc:  # noqa: BLE001 - CommClosedError, TimeoutError...: see below
+                # The scatter went to a worker that has just died, and the
+                # scheduler has not noticed yet: try again once it has.
+                error = exc
+                continue
+            self._scattered[fut.key] = data
+            fut.add_done_callback(self._finished.put)
+            return fut
+        handle = _Unsent(payload.job_id)
+        if self.client.status != "running":
+            why = self._lost_scheduler(str(self.client.status))
+        else:
+            why = (
+                f"the Dask cluster at {self.address!r} did not take the job ({type(error).__name__}: {error}); "
+                "rerun the batch once the cluster is up again (finished jobs are kept)"
+            )
+        self._unsent.append((handle, why))
+        return handle
+
+    def _lost_scheduler(self, detail: str) -> str:
+        """A job's failure reason when this driver has lost the scheduler."""
+        return (
+            f"the batch lost the Dask scheduler at {self.address!r} ({detail}); "
+            "rerun the batch once the scheduler is up again (finished jobs are kept)"
+        )
 
     def wait(self, handles: list[Any], timeout: float) -> list[tuple[Any, Any]]:
+        out: list[tuple[Any, Any]] = []
+        if self._unsent:
+            out, self._unsent = self._unsent, []
+            timeout = 0.0  # answer those now
         done = []
         try:
             done.append(self._finished.get(timeout=timeout))
@@ -279,22 +405,47 @@ class DaskEngine:
                 done.append(self._finished.get_nowait())
         except queue.Empty:
             pass
-        out: list[tuple[Any, Any]] = []
         for fut in done:
             self._scattered.pop(fut.key, None)
-            if fut.status == "finished":
-                out.append((fut, fut.result()))
-            elif fut.status == "cancelled":
-                out.append((fut, "the cluster cancelled the task (scheduler restarted or lost it)"))
-            else:
-                exc = fut.exception()
-                name = type(exc).__name__
-                if name == "KilledWorker":
-                    out.append((fut, WORKER_DIED))
-                else:
-                    out.append((fut, f"the task failed on the cluster: {name}: {exc}"))
-            fut.release()
+            out.append((fut, self._outcome(fut)))
+            try:
+                fut.release()
+            except Exception:  # noqa: BLE001 - the scheduler may be gone; nothing to release then
+                pass
         return out
+
+    def _outcome(self, fut: Any) -> Any:
+        """The :class:`JobResult` of a done task, :data:`WORKER_DIED`, or a failure reason."""
+        if fut.status == "cancelled":
+            return self._cancelled(fut)
+        try:
+            if fut.status == "finished":
+                return fut.result()  # fetched from the worker that holds it
+            exc = fut.exception()
+        except Exception as err:  # noqa: BLE001 - CommClosedError, OSError...: the result is out of reach
+            if self.client.status != "running":
+                return self._lost_scheduler(f"{type(err).__name__} while fetching the job's result")
+            # the scheduler is up, the worker holding the result is not: run the job again
+            return WORKER_DIED
+        name = type(exc).__name__
+        if name == "KilledWorker":
+            return WORKER_DIED
+        return f"the task failed on the cluster: {name}: {exc}"
+
+    def _cancelled(self, fut: Any) -> str:
+        """What a cancelled task means: :data:`WORKER_DIED` (run it again), or a failure
+        reason when this driver lost the scheduler."""
+        try:
+            fut.result(timeout=1)  # raises the cancellation, which carries distributed's reason
+            reason = ""
+        except Exception as exc:  # noqa: BLE001 - FutureCancelledError, or anything odd
+            reason = str(getattr(exc, "reason", "") or "")
+        if reason in SCHEDULER_GONE or self.client.status != "running":
+            return self._lost_scheduler(reason or str(self.client.status))
+        # The scheduler is there and cancelled the task itself: the worker that
+        # held the job's scattered payload died ("lost dependencies", or no
+        # reason given). The payload is still here, so the job can run again.
+        return WORKER_DIED
 
     def events(self) -> list[tuple[str, str]]:
         ev = []
@@ -308,11 +459,14 @@ class DaskEngine:
         # Closing the client releases its futures: the scheduler drops the
         # tasks nobody wants any more (``cancel`` needs nothing else).
         try:
-            self.client.unsubscribe_topic(self.topic)
-        except Exception:  # noqa: BLE001 - closing must not hide the batch's own outcome
-            pass
-        self._scattered.clear()
-        self.client.close()
+            try:
+                self.client.unsubscribe_topic(self.topic)
+            except Exception:  # noqa: BLE001 - closing must not hide the batch's own outcome
+                pass
+            self._scattered.clear()
+            self.client.close(timeout=CLOSE_TIMEOUT_S)
+        finally:
+            self._quiet.restore()  # after the client's close: it logs too when the scheduler is gone
 
 
 def make_engine(workers: int, scheduler: str | None, threads: int = 1) -> Any:
@@ -324,4 +478,12 @@ def make_engine(workers: int, scheduler: str | None, threads: int = 1) -> Any:
     return LocalPoolEngine(workers, threads=threads)
 
 
-__all__ = ["WORKER_DIED", "DaskEngine", "InProcessEngine", "JobResult", "LocalPoolEngine", "make_engine"]
+__all__ = [
+    "WORKER_DIED",
+    "DaskEngine",
+    "InProcessEngine",
+    "JobResult",
+    "LocalPoolEngine",
+    "QuietDaskLogs",
+    "make_engine",
+]

@@ -37,16 +37,21 @@ are comments.
 
 Paths are relative to the manifest's folder and must stay inside it (after
 resolving ``..`` and symbolic links); absolute paths are refused. A manifest
-with a structural mistake (bad syntax, unknown key, duplicate id, a path
-leaving the folder) is refused as a whole, with every problem listed, before
-any work starts; a job whose files are missing or unreadable fails on its own
-when the batch runs.
+with a structural mistake (bad syntax, nesting over :data:`MAX_NESTING` deep,
+unknown key, duplicate id, an id the batch's own files use, a bad option
+value, a path leaving the folder) is refused as a whole, with every problem
+listed, before any work starts; option values are judged by the rules
+``saucerfab design`` applies before its work (:func:`_check_design_options`).
+A job whose files are missing or unreadable fails on its own when the batch
+runs.
 """
 
 from __future__ import annotations
 
 import csv
+import functools
 import io
+import json
 import os
 import re
 import tomllib
@@ -60,8 +65,13 @@ from saucerfab.errors import ConfigError
 MAX_MANIFEST_BYTES = 16 * 1024 * 1024
 #: most jobs in one manifest
 MAX_JOBS = 100_000
-#: job ids name output folders: letters, digits, '.', '_', '-'
-ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,79}$")
+#: job ids name output folders: letters, digits, '.', '_', '-' (matched with
+#: ``fullmatch``: ``$`` alone would also accept a trailing newline)
+ID_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,79}")
+#: deepest nesting of arrays and tables a manifest may hold; a manifest needs 5
+#: (the document, ``[[job]]``, a job, its ``design_options``, a list in it), and
+#: neither the parser nor any later walk of the data may run out of stack
+MAX_NESTING = 32
 
 #: keys naming input files of a design run (role -> required)
 IMAGE_KEYS = ("direct", "reflected", "reflected2", "direct_mask", "reflected_mask", "reflected2_mask")
@@ -83,11 +93,27 @@ JOB_KEYS = frozenset(
 SHAPE_SUFFIXES = (".png", ".npy")
 
 
+def reserved_names() -> frozenset[str]:
+    """Names the batch itself writes in its output folder, which no job id may take.
+
+    A job folder named like a report would replace it (and every later write
+    of the report would fail on the folder); the hidden names cannot match
+    :data:`ID_RE` today, but are listed so that they stay reserved if it changes.
+    (Imported here, not at the top: the runner imports this module.)
+    """
+    from saucerfab.batch.report import HTML_NAME, JSON_NAME
+    from saucerfab.batch.runner import LOCK_NAME, SCRATCH_NAME
+
+    return frozenset({JSON_NAME, HTML_NAME, LOCK_NAME, SCRATCH_NAME})
+
+
 def design_option_keys() -> frozenset[str]:
     """Fields of :class:`~saucerfab.optimize.request.DesignRequest` a job may override."""
     from saucerfab.optimize.request import DesignRequest
 
-    taken = {*IMAGE_KEYS, "shape", "scene", "cup", "extra"}
+    # printer and cup_diameter_mm are the job's own keys: the design is made for the
+    # printer and size the job exports for (saucerfab.optimize.printable)
+    taken = {*IMAGE_KEYS, "shape", "scene", "cup", "extra", "printer", "cup_diameter_mm"}
     return frozenset(f.name for f in fields(DesignRequest) if f.init and f.name not in taken)
 
 
@@ -194,10 +220,17 @@ def _build_job(raw: dict[str, Any], root: Path, where: str) -> JobSpec:
     if unknown:
         raise ConfigError(f"{where}: unknown key(s) {sorted(unknown)}; allowed: {sorted(JOB_KEYS)}")
     job_id = raw.get("id")
-    if not isinstance(job_id, str) or not ID_RE.match(job_id):
+    if not isinstance(job_id, str) or not ID_RE.fullmatch(job_id):
         raise ConfigError(
             f"{where}: id {job_id!r} is missing or not a valid name; use 1-80 letters, digits, "
             "'.', '_' or '-', starting with a letter or digit (it names the job's output folder)"
+        )
+    reserved = reserved_names()
+    # case-insensitively: on macOS and Windows disks 'Batch-Report.JSON' is the report
+    if job_id.casefold() in {n.casefold() for n in reserved}:
+        raise ConfigError(
+            f"{where}: id {job_id!r} is the name of a file the batch writes in its output folder "
+            f"(reserved: {', '.join(sorted(reserved))}); give the job another id"
         )
     where = f"{where} (id {job_id!r})"
 
@@ -296,15 +329,7 @@ def _build_job(raw: dict[str, Any], root: Path, where: str) -> JobSpec:
         raise ConfigError(
             f"{where}: unknown design option(s) {sorted(unknown_opts)}; allowed: {sorted(allowed)}"
         )
-    # Validate the values now (types, ranges) by building the request once.
-    from saucerfab.optimize.request import DesignRequest
-
-    try:
-        DesignRequest(direct=files["direct"], reflected=files["reflected"], **design_options)
-    except ConfigError as exc:
-        raise ConfigError(f"{where} design_options: {exc}") from None
-    except TypeError as exc:
-        raise ConfigError(f"{where} design_options: {exc}") from None
+    _check_design_options(design_options, files, scene_name, cup or None, where)
     return JobSpec(
         files=files,
         shape=shape_name,
@@ -313,6 +338,118 @@ def _build_job(raw: dict[str, Any], root: Path, where: str) -> JobSpec:
         design_options=design_options,
         **common,  # type: ignore[arg-type]
     )
+
+
+def _type_problem(value: Any, hint: Any) -> str | None:
+    """Why ``value`` does not fit the type annotation ``hint``, or None when it does.
+
+    Covers the annotations of :class:`~saucerfab.optimize.request.DesignRequest`'s
+    option fields (``int``, ``float``, ``str``, ``bool``, ``X | None``); TOML and
+    CSV values are plain, so nothing more is needed. An int is a float
+    (``height_scale = 1``); a bool is neither (Python's bool is an int).
+    """
+    import types
+    import typing
+
+    origin = typing.get_origin(hint)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(hint)
+        if value is None and type(None) in args:
+            return None
+        problems = [_type_problem(value, a) for a in args if a is not type(None)]
+        return None if any(p is None for p in problems) else " or ".join(p for p in problems if p)
+    if hint is bool:
+        return None if isinstance(value, bool) else "true or false"
+    if hint is int:
+        return None if isinstance(value, int) and not isinstance(value, bool) else "a whole number"
+    if hint is float:
+        return None if isinstance(value, (int, float)) and not isinstance(value, bool) else "a number"
+    if hint is str:
+        return None if isinstance(value, str) else "a string"
+    return None  # an annotation this check does not know: the request's own checks judge the value
+
+
+@functools.lru_cache(maxsize=1)
+def _request_hints() -> dict[str, Any]:
+    """:class:`DesignRequest`'s field annotations, evaluated once (get_type_hints is slow)."""
+    import typing
+
+    from saucerfab.optimize.request import DesignRequest
+
+    return typing.get_type_hints(DesignRequest)
+
+
+def _check_design_options(
+    options: dict[str, Any], files: dict[str, Path], scene: str | None, cup: str | None, where: str
+) -> None:
+    """Refuse, at load, every design option value ``saucerfab design`` would refuse before its work.
+
+    The rules are the CLI's own, not copies: the option types are the
+    :class:`DesignRequest` field annotations (argparse's ``type=`` on the
+    command line), the value checks are ``DesignRequest``'s and
+    ``check_weights``' (a weight the ablation does not use), and the
+    resolution and image-size ranges are those of the scene the run builds
+    (:func:`~saucerfab.optimize.pipeline.build_scene`, as the design's
+    ``prepare`` does). A job with a scene *file* has its overrides checked on
+    the paper preset's scene (the ranges do not depend on the scene) and
+    its cup with the scene file when the job runs: the file is the job's
+    input, read when the job runs, not when the manifest loads.
+    """
+    import argparse
+
+    from saucerfab.errors import SaucerfabError
+    from saucerfab.heightfield import check_height_scale
+    from saucerfab.optimize.request import DesignRequest
+
+    hints = _request_hints()
+    for name, value in sorted(options.items()):
+        want = _type_problem(value, hints.get(name))
+        if want is not None:
+            raise ConfigError(f"{where} design_options: {name} must be {want}, got {value!r}")
+    try:
+        request = DesignRequest(direct=files["direct"], reflected=files["reflected"], **options)
+        from saucerfab.cli.design import check_weights
+
+        check_weights(
+            argparse.Namespace(ablation=request.ablation, w_large=request.w_large, w_small=request.w_small, lam=request.lam)
+        )
+        check_height_scale(request.height_scale)
+    except SaucerfabError as exc:
+        raise ConfigError(f"{where} design_options: {exc}") from None
+    except TypeError as exc:
+        raise ConfigError(f"{where} design_options: {exc}") from None
+    scene, cup = (scene, cup) if scene is not None else ("paper", None)
+    try:
+        key = json.dumps(options, sort_keys=True)
+    except (TypeError, ValueError):  # a value JSON cannot hold (a TOML date): check it uncached
+        problem = _scene_problem(scene, cup, options)
+    else:
+        problem = _scene_problem_cached(scene, cup, key)
+    if problem is not None:
+        raise ConfigError(f"{where} design_options: {problem}")
+
+
+def _scene_problem(scene: str, cup: str | None, options: dict[str, Any]) -> str | None:
+    """Why the design run's scene (preset ``scene``, ``cup`` override) cannot be built
+    with these design options, in the design's own words, or None when it can."""
+    from saucerfab.errors import SaucerfabError
+    from saucerfab.optimize.pipeline import build_scene
+    from saucerfab.optimize.request import DesignRequest
+
+    try:
+        build_scene(DesignRequest(direct=Path("direct"), reflected=Path("reflected"), scene=scene, cup=cup, **options))
+    except SaucerfabError as exc:
+        return str(exc)
+    except TypeError as exc:  # a value of the wrong type the annotations let through
+        return str(exc)
+    return None
+
+
+@functools.lru_cache(maxsize=256)
+def _scene_problem_cached(scene: str, cup: str | None, options_json: str) -> str | None:
+    """:func:`_scene_problem`, cached: building a scene takes milliseconds, a manifest
+    may list 100,000 jobs, and most share their options through ``[defaults]``."""
+    return _scene_problem(scene, cup, json.loads(options_json))
 
 
 def export_option_keys() -> frozenset[str]:
@@ -362,11 +499,51 @@ def _read_text(path: Path) -> str:
         raise ConfigError(f"cannot read manifest {str(path)!r}: {exc}") from None
 
 
-def _toml_rows(path: Path, text: str) -> tuple[dict[str, Any], list[tuple[str, dict[str, Any]]]]:
+def nesting_depth(value: Any) -> int:
+    """How deeply arrays and tables nest in ``value`` (a scalar: 0), without recursion.
+
+    Counting stops past :data:`MAX_NESTING`, so the answer is at most one more.
+    """
+    deepest = 0
+    stack: list[tuple[Any, int]] = [(value, 0)]
+    while stack:
+        v, depth = stack.pop()
+        if isinstance(v, dict):
+            v = list(v.values())
+        if isinstance(v, (list, tuple)):
+            depth += 1
+            deepest = max(deepest, depth)
+            if depth <= MAX_NESTING:  # deeper is refused anyway: stop counting
+                stack.extend((x, depth) for x in v)
+    return deepest
+
+
+def _toml_loads(text: str, what: str) -> dict[str, Any]:
+    """``tomllib.loads`` with a syntax error, or nesting too deep, as a :class:`ConfigError`.
+
+    tomllib parses arrays and inline tables recursively: a file nesting a few
+    thousand of them exhausts the stack (RecursionError), which is the file's
+    fault, not a crash.
+    """
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"manifest {str(path)!r} is not valid TOML: {exc}") from None
+        raise ConfigError(f"{what} is not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ConfigError(
+            f"{what} nests arrays or tables too deeply to be read; "
+            f"a manifest needs at most {MAX_NESTING} levels: remove the nesting"
+        ) from None
+    if nesting_depth(data) > MAX_NESTING:
+        raise ConfigError(
+            f"{what} nests arrays or tables over {MAX_NESTING} levels deep; a manifest needs "
+            "at most a few (a job's option table holds lists of numbers at most): remove the nesting"
+        )
+    return data
+
+
+def _toml_rows(path: Path, text: str) -> tuple[dict[str, Any], list[tuple[str, dict[str, Any]]]]:
+    data = _toml_loads(text, f"manifest {str(path)!r}")
     unknown = set(data) - {"defaults", "job", "batch"}
     if unknown:
         raise ConfigError(
@@ -401,6 +578,12 @@ def parse_options_cell(cell: str, where: str) -> dict[str, Any]:
             out[k] = tomllib.loads(f"v = {v}")["v"]
         except tomllib.TOMLDecodeError:
             out[k] = v
+        except RecursionError:  # see _toml_loads
+            raise ConfigError(f"{where}: the value of {k!r} nests arrays or tables too deeply to be read") from None
+        if nesting_depth(out[k]) > MAX_NESTING:
+            raise ConfigError(
+                f"{where}: the value of {k!r} nests arrays or tables over {MAX_NESTING} levels deep; remove the nesting"
+            )
     return out
 
 

@@ -45,6 +45,7 @@ from saucerfab.batch.report import (
     write_reports,
 )
 from saucerfab.errors import ConfigError, Interrupted, SaucerfabError
+from saucerfab.fileio import exclusive_lock
 
 LOCK_NAME = ".saucerfab-batch.lock"
 SCRATCH_NAME = ".batch-tmp"
@@ -54,24 +55,20 @@ MAX_ATTEMPTS = 2
 
 @contextlib.contextmanager
 def _locked(out: Path) -> Iterator[None]:
-    """Hold an exclusive lock on ``out`` (one batch per output folder); freed even on kill -9."""
-    try:
-        import fcntl
-    except ImportError:  # Windows: no advisory locks; one batch per folder is on the user
+    """Hold an exclusive lock on ``out`` (one batch per output folder); freed even on kill -9.
+
+    The lock file stays in ``out`` (which a batch never replaces); see
+    :func:`saucerfab.fileio.exclusive_lock`.
+    """
+
+    def busy() -> ConfigError:
+        return ConfigError(
+            f"another saucerfab batch is writing into {str(out)!r}; wait for it to finish "
+            "or give another --out"
+        )
+
+    with exclusive_lock(out / LOCK_NAME, busy):
         yield
-        return
-    fh = open(out / LOCK_NAME, "a+b")  # noqa: SIM115 - held for the whole batch
-    try:
-        try:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise ConfigError(
-                f"another saucerfab batch is writing into {str(out)!r}; wait for it to finish "
-                "or give another --out"
-            ) from None
-        yield
-    finally:
-        fh.close()
 
 
 def clean_stale(out: Path) -> list[Path]:

@@ -6,7 +6,8 @@ Prints progress (stderr), a summary (size, triangles, volume, file sizes,
 warnings) and the validity check of each written mesh file
 (``saucerfab.check.check_mesh``). Exit code: 0 when written and every check
 passes, the worst check's exit code otherwise (1 not printable, 2
-unreadable), 2 for bad input (nothing written then).
+unreadable), 2 for bad input (nothing written then) and when another export
+is writing into the same ``--out`` (one at a time; the second stops at once).
 """
 
 from __future__ import annotations
@@ -129,11 +130,23 @@ def check_other_export(design: str, out: str, force: bool) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from saucerfab.fabricate.pipeline import export_lock
+
+    seat = _seat(args)
+    # One export per --out at a time, held from the look at what --out holds
+    # to the last line printed: the export replaces the folder whole, and the
+    # check and verify read (and the report names) the files it wrote, which
+    # a second export into the folder would remove.
+    with export_lock(args.out):
+        return _run_locked(args, seat)
+
+
+def _run_locked(args: argparse.Namespace, seat: str) -> int:
+    """The export, check, verify and summary, with ``--out`` held by :func:`export_lock`."""
     from saucerfab.fabricate.options import FabOptions
     from saucerfab.fabricate.pipeline import export_design
     from saucerfab.fabricate.profiles import load_profile
 
-    seat = _seat(args)
     check_other_export(args.design, args.out, args.force)
     options = FabOptions(
         base_thickness_mm=args.base_mm,

@@ -11,16 +11,23 @@ input never leaves a half-written folder.
 Reproducible: the same design and options give byte-identical files (no
 dates or random names in any file; fixed zip entry dates; canonical mesh
 order). Timings are returned, never written.
+
+One export per folder at a time: ``export_design`` replaces the whole folder,
+so two exports into it at once would each report files the other then
+removes. :func:`export_lock` holds the folder for the length of an export and
+whatever reads its files afterwards (``saucerfab export`` holds it over the
+export, the check and the verify); a second one fails at once.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -100,6 +107,56 @@ class ExportResult:
             "warnings": list(self.warnings),
             "timings": dict(self.timings),
         }
+
+
+def export_lock_path(out: str | os.PathLike[str]) -> Path:
+    """The lock file of the export folder ``out``: hidden, *beside* it (``.<name>.export.lock``).
+
+    Not inside it: the export replaces the folder whole (a lock file in it
+    would go with the old folder, and the next export would lock a new one).
+    """
+    out = Path(out).resolve()  # one lock however the folder is named (relative, via a link)
+    return out.parent / f".{out.name}.export.lock"
+
+
+@contextlib.contextmanager
+def export_lock(out: str | os.PathLike[str]) -> Iterator[None]:
+    """Hold the export folder ``out`` for one export; the lock file goes when done.
+
+    Raises:
+        ExportError: another export (another process, or another thread of
+            this one) is writing ``out``.
+    """
+    from saucerfab.fileio import exclusive_lock
+
+    lock = export_lock_path(out)
+    # the lock lives in --out's parent, which may not exist yet: make it, and
+    # take away again what was made when the export wrote nothing (bad input)
+    made = [p for p in (lock.parent, *lock.parent.parents) if not p.exists()]
+    try:
+        lock.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ExportError(f"cannot create the folder of --out {str(out)!r}: {exc.strerror or exc}") from None
+
+    def busy() -> ExportError:
+        return ExportError(
+            f"another saucerfab export is writing into {str(out)!r} right now; wait for it to finish "
+            "or give another --out (two exports into one folder would remove each other's files)"
+        )
+
+    try:
+        with exclusive_lock(lock, busy, remove=True):
+            yield
+    except OSError as exc:
+        if exc.filename is not None and Path(exc.filename) == lock:
+            raise ExportError(f"cannot lock --out {str(out)!r} ({str(lock)!r}): {exc.strerror or exc}") from None
+        raise
+    finally:
+        for p in made:  # innermost first; a folder someone put anything in stays
+            try:
+                p.rmdir()
+            except OSError:
+                break
 
 
 def _resolve_design(design: Design | str | os.PathLike[str]) -> Design:
