@@ -30,15 +30,10 @@ sys.path.insert(0, str(ROOT))
 from saucerfab.optimize.pipeline import run_design  # noqa: E402
 from saucerfab.optimize.request import DesignRequest  # noqa: E402
 
-SAMPLES = ROOT / "samples"
-
-#: bundled image pairs (direct, reflected): the demo's, and two made of the
+#: bundled graphic pairs (direct, reflected): the demo's, and two made of the
 #: batch variants (non-square JPEG, 16-bit grey, palette with transparency)
-PAIRS = {
-    "heart-star": ("direct_heart.png", "reflected_star.png"),
-    "fish-moon": ("fish_wide.jpg", "reflected2_moon.png"),
-    "tree-note": ("tree_gray16.png", "note_palette.png"),
-}
+from saucerfab.samples import GRAPHIC_PAIRS as PAIRS  # noqa: E402  (one list: saucerfab/samples.py)
+from saucerfab.samples import SAMPLES  # noqa: E402
 
 
 def machine() -> str:

@@ -29,21 +29,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_design import PAIRS as GRAPHIC_PAIRS
-from bench_design import SAMPLES, machine
+from bench_design import machine  # noqa: E402
 
-from saucerfab.cli import main as cli
-from saucerfab.verify import EyeSpec, verify_print
-
-#: full-bleed photographs shipped in samples/photos (CC0 / public domain, from
-#: scikit-image's data; provenance in samples/photos/README.md)
-PHOTO_PAIRS = {
-    "chelsea-coffee": ("photos/chelsea.png", "photos/coffee.png"),
-    "astronaut-rocket": ("photos/astronaut.png", "photos/rocket.jpg"),
-    "coffee-hubble": ("photos/coffee.png", "photos/hubble_deep_field.jpg"),
-    "rocket-chelsea": ("photos/rocket.jpg", "photos/chelsea.png"),
-}
-PAIRS = {**GRAPHIC_PAIRS, **PHOTO_PAIRS}
+from saucerfab.cli import main as cli  # noqa: E402
+from saucerfab.samples import GRAPHIC_PAIRS, PAIRS, PHOTO_PAIRS, SAMPLES  # noqa: E402  (one list)
+from saucerfab.verify import EyeSpec, verify_print  # noqa: E402
 
 
 def run_pair(pair: str, args: argparse.Namespace, tmp: Path) -> dict:
@@ -68,8 +58,10 @@ def run_pair(pair: str, args: argparse.Namespace, tmp: Path) -> dict:
         raise SystemExit(f"export failed for {pair} (exit {rc})")
     res = verify_print(print_dir, eyes=EyeSpec("both"), res=args.res, spp=args.spp, all_formats=False,
                        pictures_dir=(Path(args.keep) / args.label / pair / "verify") if args.keep else None)
+    printers = every_printer(design, tmp / pair) if args.all_printers else None
     return {
         "pair": pair,
+        "printers": printers,
         "command": " && ".join([
             f"saucerfab design --direct samples/{direct} --reflected samples/{reflected} --out D "
             + " ".join([*size, *shlex.split(args.design_args)]),
@@ -81,6 +73,40 @@ def run_pair(pair: str, args: argparse.Namespace, tmp: Path) -> dict:
         "verify_s": res.seconds,
         "scores": {f"{v.view}/{v.eye}": v.to_dict() for v in res.files[0].views},
     }
+
+
+def every_printer(design: Path, tmp: Path) -> dict[str, dict]:
+    """Export ``design`` for every bundled profile (its preferred format) and hold the check to --strict."""
+    import contextlib
+    import io
+
+    from saucerfab.fabricate.profiles import list_profiles
+
+    out: dict[str, dict] = {}
+    for key in list_profiles():
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
+            rc = cli(["export", str(design), "--printer", key, "--no-verify", "--json", "-o", str(tmp / f"print_{key}")])
+        doc = json.loads(buf.getvalue()) if rc == 0 else {}
+        loud = [f"{f['severity']}: {f['message']}" for c in doc.get("checks", []) for f in c["findings"]
+                if f["severity"] in ("error", "warning")]
+        moved = [w for w in doc.get("warnings", []) if "relief vertices were moved" in w]
+        out[key] = {"exit": rc, "strict_ok": rc == 0 and not loud, "findings": loud, "blunted": moved}
+    return out
+
+
+def printers_table(rows: list[dict]) -> str:
+    keys = sorted({k for r in rows for k in (r.get("printers") or {})})
+    out = ["| pair | " + " | ".join(keys) + " |", "|---|" + "---|" * len(keys)]
+    for r in rows:
+        cells = []
+        for k in keys:
+            e = (r.get("printers") or {}).get(k)
+            cells.append("-" if e is None else ("exit 0, strict ok" if e["strict_ok"] else f"exit {e['exit']}, "
+                                                  f"{len(e['findings'])} findings")
+                         + (" (blunted)" if e and e["blunted"] else ""))
+        out.append(f"| {r['pair']} | " + " | ".join(cells) + " |")
+    return "\n".join(out)
 
 
 def table(rows: list[dict], label: str) -> str:
@@ -117,6 +143,8 @@ def main() -> int:
     p.add_argument("--spp", type=int, default=16)
     p.add_argument("--keep", help="keep the verify pictures here (LABEL/PAIR/verify)")
     p.add_argument("--json", help="also write the rows as JSON to this file")
+    p.add_argument("--all-printers", action="store_true",
+                   help="also export each design for every bundled printer and hold its check to --strict")
     args = p.parse_args()
     groups = {"all": list(PAIRS), "graphics": list(GRAPHIC_PAIRS), "photos": list(PHOTO_PAIRS)}
     pairs = groups.get(args.pairs) or args.pairs.split(",")
@@ -134,6 +162,9 @@ def main() -> int:
     for r in rows:
         print(f"{r['pair']}: {r['command']}")
     print(table(rows, args.label))
+    if args.all_printers:
+        print()
+        print(printers_table(rows))
     if args.json:
         Path(args.json).write_text(json.dumps({"label": args.label, "machine": machine(), "rows": rows}, indent=2))
     return 0

@@ -30,8 +30,7 @@ import time
 from pathlib import Path
 
 from saucerfab.cli import main as cli
-
-SAMPLES = Path(__file__).resolve().parents[1] / "samples"
+from saucerfab.samples import DEMO_PAIR, SAMPLES, pair_paths
 
 
 def run(argv: list[str] | None = None) -> int:
@@ -42,13 +41,13 @@ def run(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     out = Path(args.out)
     samples = Path(args.samples)
+    direct, reflected = pair_paths(DEMO_PAIR, samples)
     size = ["--resolution", "60", "--image-size", "192", "--max-iters", "150"] if args.quick else []
     steps = [
         [
             "design",
-            "--direct", str(samples / "direct_heart.png"),
-            "--reflected", str(samples / "reflected_star.png"),
-            "--shape", "waves",
+            "--direct", str(direct),
+            "--reflected", str(reflected),
             "--out", str(out / "design"),
             "--force",  # the demo's own folder from an earlier run
             *size,

@@ -110,6 +110,18 @@ def _stand(where: dict[str, Any]) -> str:
 # --------------------------------------------------------------------------- design folder
 
 
+def _made_for(target: Mapping[str, Any] | None, printable: Mapping[str, Any] | None) -> str:
+    """The design's printer and what its relief rules did, in one line (``-`` for older designs)."""
+    if not target:
+        return "- (made before designs knew their printer)"
+    p = printable or {}
+    left = int(p.get("thin_crest_vertices", 0)) + int(p.get("thin_wall_crest_vertices", 0))
+    return (f"{target.get('printer_name')}: minimum feature {target.get('min_feature_mm')} mm, wall "
+            f"{target.get('min_wall_mm')} mm; the optimizer blunted crests on {p.get('projection_active', 0)} of "
+            f"{p.get('projection_calls', 0)} trial steps, "
+            + ("none is left under them" if not left else f"{left} crest vertices are still under them"))
+
+
 def design_report(design: Design, previews: Mapping[str, bytes], folder: Path | None = None) -> str:
     """The HTML page of a design folder (titled by its input pictures, so it does not depend on the folder's name).
 
@@ -145,6 +157,7 @@ def design_report(design: Design, previews: Mapping[str, bytes], folder: Path | 
         "cup": f"{scene.cup.kind}, {scene.cup_diameter_mm:g} mm wide",
         "saucer": f"{scene.saucer.size[0] * s:.0f} x {scene.saucer.size[1] * s:.0f} mm, relief bound "
                   f"{scene.saucer.delta * s:.2f} mm, {scene.saucer.resolution} x {scene.saucer.resolution} grid",
+        "made for": _made_for(params.get("print_target"), metrics.get("printable")),
         "frames": str(params.get("frames", "-")),
         "method": str(params.get("ablation", "-")),
         "where to stand": _stand(where),

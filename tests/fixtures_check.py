@@ -54,19 +54,31 @@ def saucer_solid(n: int = 40, size_mm: float = 100.0, base_mm: float = 3.0, amp_
     xs = np.linspace(0, size_mm, n)
     gx, gy = np.meshgrid(xs, xs)
     h = base_mm + amp_mm * (0.5 + 0.5 * np.sin(gx / size_mm * 6.0) * np.cos(gy / size_mm * 5.0))
-    top = np.stack([gx.ravel(), gy.ravel(), h.ravel()], axis=1)
-    bot = np.stack([gx.ravel(), gy.ravel(), np.zeros(n * n)], axis=1)
+    return heightfield_solid(h, xs, xs)
+
+
+def heightfield_solid(h: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The closed solid under heights ``h`` (rows along ``ys``, columns along ``xs``, mm, all > 0).
+
+    Flat bottom at z = 0, vertical sides. Returns (vertices, faces, per-vertex uv in [0, 1]).
+    """
+    ny, nx = h.shape
+    gx, gy = np.meshgrid(xs, ys)
+    top = np.stack([gx.ravel(), gy.ravel(), np.asarray(h, np.float64).ravel()], axis=1)
+    bot = np.stack([gx.ravel(), gy.ravel(), np.zeros(nx * ny)], axis=1)
     V = np.concatenate([top, bot])
-    idx = np.arange(n * n).reshape(n, n)
+    m = nx * ny
+    idx = np.arange(m).reshape(ny, nx)
     a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
     top_f = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-    bot_f = top_f[:, ::-1] + n * n
+    bot_f = top_f[:, ::-1] + m
     ring = np.concatenate([idx[0, :-1], idx[:-1, -1], idx[-1, ::-1][:-1], idx[::-1, 0][:-1]])
     nxt = np.roll(ring, -1)
     # the ring runs counter-clockwise seen from +z, so side quads (top i, top j, bottom j, bottom i) face out
-    side = np.concatenate([np.stack([ring, ring + n * n, nxt + n * n], 1), np.stack([ring, nxt + n * n, nxt], 1)])
+    side = np.concatenate([np.stack([ring, ring + m, nxt + m], 1), np.stack([ring, nxt + m, nxt], 1)])
     F = np.concatenate([top_f, bot_f, side])
-    uv = V[:, :2] / size_mm
+    lo, hi = V[:, :2].min(axis=0), V[:, :2].max(axis=0)
+    uv = (V[:, :2] - lo) / (hi - lo)
     return V, F, uv
 
 

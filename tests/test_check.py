@@ -438,6 +438,29 @@ def test_thin_wall_with_location_and_policy(tmp_path: Path) -> None:
     assert "thin_walls" not in codes(r) and r.stats["min_wall_mm"] == pytest.approx(0.6, abs=1e-3)
 
 
+def test_relief_crests_are_not_thin_walls_but_fins_are(tmp_path: Path) -> None:
+    # a sawtooth top like the default design's waves: 0.5 mm rises per 0.67 mm step up to a crest,
+    # then a 6 mm cliff; just under each crest the tooth is under 1 mm thick across its cliff
+    ys = np.arange(0, 60.0, 0.67)
+    xs = np.linspace(0, 30.0, 12)
+    tooth = np.mod(np.arange(len(ys)), 12)
+    h = 10.0 + 0.5 * tooth[:, None] * np.ones((1, len(xs)))
+    V, F, _ = fx.heightfield_solid(h, xs, ys)
+    r = check_mesh(fx.write_stl(tmp_path / "teeth.stl", V, F), printer="j55")
+    assert "thin_walls" not in codes(r) and r.with_strict().exit_code == 0
+    assert r.stats["relief_thin_samples"] > 0 and r.stats["min_wall_mm"] >= 1.0
+    # a fin: one row 10 mm above its neighbours, 1 mm wide at its foot: thin for most of its height
+    ys = np.arange(0, 10.0, 0.5)
+    xs = np.linspace(0, 20.0, 9)
+    h = np.full((len(ys), len(xs)), 5.0)
+    h[10] = 15.0
+    V, F, _ = fx.heightfield_solid(h, xs, ys)
+    r = check_mesh(fx.write_stl(tmp_path / "fin.stl", V, F), printer="j55")
+    f = next(f for f in r.findings if f.code == "thin_walls")
+    assert f.severity == "warning" and r.stats["min_wall_mm"] < 0.5
+    assert r.stats["relief_thin_samples"] > 0  # its foot, beside the block, is relief
+
+
 def test_unknown_printer_is_a_config_error(tmp_path: Path) -> None:
     V, F = fx.box()
     with pytest.raises(ConfigError, match="unknown printer"):

@@ -593,19 +593,25 @@ def test_refuses_to_replace_an_unrelated_folder(design: Design, tmp_path: Path) 
     assert sorted(p.name for p in second.out.iterdir()) == ["export.json", "saucer.stl", "scene.json"]
 
 
-def test_thin_features_warn_or_refuse_per_profile(tmp_path: Path) -> None:
+def test_thin_features_are_blunted_or_refused_per_profile(tmp_path: Path) -> None:
     # a 4 mm cup makes the synthetic bumps 0.17 mm wide: thinner than any printer makes
     d = synthetic_design(resolution=24, texture_size=TEX, seed=1)
+    opts = FabOptions(texture_px=ATLAS, seat_rim_mm=1.0, base_thickness_mm=1.0, min_thickness_mm=1.0)
     warn = replace(ALL_FORMATS, min_wall_mm=0.5)
-    res = export_design(d, tmp_path / "w", printer=warn, cup_diameter_mm=4.0, formats=["stl"],
-                        options=FabOptions(texture_px=ATLAS, seat_rim_mm=1.0, base_thickness_mm=1.0, min_thickness_mm=1.0))
-    assert any("thinner than the minimum feature" in w for w in res.warnings)
+    res = export_design(d, tmp_path / "w", printer=warn, cup_diameter_mm=4.0, formats=["stl"], options=opts)
+    # the export blunts them with the optimizer's rule (saucerfab.relief) and says so
+    assert any("no crest is narrower than" in w and "design with --printer" in w for w in res.warnings)
     assert json.loads(res.summary_json.read_text())["warnings"] == res.warnings
     refuse = replace(warn, thin_policy="refuse")
-    with pytest.raises(MeshError, match="too thin"):
-        export_design(d, tmp_path / "r", printer=refuse, cup_diameter_mm=4.0, formats=["stl"],
-                      options=FabOptions(texture_px=ATLAS, seat_rim_mm=1.0, base_thickness_mm=1.0, min_thickness_mm=1.0))
-    assert not (tmp_path / "r").exists()
+    ok = export_design(d, tmp_path / "r", printer=refuse, cup_diameter_mm=4.0, formats=["stl"], options=opts)
+    assert ok.warnings == res.warnings
+    # with no room under the height bound to blunt them, a refuse profile refuses
+    spiky = replace(d, base_heights=d.heights, scene=d.scene.with_changes(saucer=replace(d.scene.saucer, delta=1e-9)))
+    with pytest.raises(MeshError, match="too thin.*no room"):
+        export_design(spiky, tmp_path / "x", printer=refuse, cup_diameter_mm=4.0, formats=["stl"], options=opts)
+    assert not (tmp_path / "x").exists()
+    warned = export_design(spiky, tmp_path / "y", printer=warn, cup_diameter_mm=4.0, formats=["stl"], options=opts)
+    assert any("thinner than the minimum feature" in w for w in warned.warnings)
 
 
 # --------------------------------------------------------------------------- CLI

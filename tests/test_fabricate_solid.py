@@ -20,7 +20,6 @@ from saucerfab.fabricate.solid import (
     build_solid,
     canonical_order,
     check_features,
-    crest_widths,
     footprint_on_clipper_grid,
     snap_to_footprint,
 )
@@ -426,24 +425,6 @@ def test_snap_to_footprint_moves_only_points_on_the_border() -> None:
 
 
 # --------------------------------------------------------------------------- thin walls and features
-
-
-def test_crest_width_of_a_symmetric_spike_is_one_spacing() -> None:
-    h = np.zeros((7, 7))
-    h[3, 3] = 5.0
-    w = crest_widths(h, dx_mm=0.4, dy_mm=0.6, min_height_mm=0.1)
-    assert w[3, 3] == pytest.approx(0.4)  # along x; y gives 0.6, the diagonal hypot(0.4, 0.6)
-    assert np.isinf(np.delete(w.ravel(), 3 * 7 + 3)).all()
-
-
-def test_crest_width_of_an_asymmetric_crest() -> None:
-    h = np.zeros((3, 3))
-    h[:, 0], h[:, 1], h[:, 2] = 0.0, 10.0, 5.0  # a ridge along y, steeper on its left
-    w = crest_widths(h, 1.0, 1.0, 0.1)
-    # prominence 5; half height 7.5 is 0.25 to the left and 0.5 to the right
-    assert w[1, 1] == pytest.approx(0.75)
-    # a crest lower than min_height is no feature
-    assert np.isinf(crest_widths(h, 1.0, 1.0, 6.0)[1, 1])
 
 
 def test_check_features_counts_thin_crests() -> None:

@@ -257,6 +257,9 @@ def load_payload(
         request["scene"] = by_role.get("scene", job.scene)
         if job.cup:
             request["cup"] = job.cup
+        # the design is made for the printer and cup the job exports for
+        request["printer"] = job.printer
+        request["cup_diameter_mm"] = float(job.cup_diameter_mm)
     return Payload(
         job_id=job.id,
         key=key,

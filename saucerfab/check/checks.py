@@ -108,6 +108,7 @@ def run_checks(
         "min_wall_required_mm": None,
         "thin_wall_samples": 0,
         "thin_wall_fraction": None,
+        "relief_thin_samples": 0,
         "manifold3d_status": None,
         "textures": [t.to_dict() for t in md.textures],
         "texture_px": max((max(t.width or 0, t.height or 0) for t in md.textures), default=None) or None,
@@ -408,6 +409,17 @@ def _thin_walls(bvh: BVH, tri: np.ndarray, normals: np.ndarray, areas: np.ndarra
     if not ok.any():
         return
     tt = t[ok]
+    if required is not None and (tt < required).any():
+        # a thin spot beside thick material is relief (a crest, a spike's tip, a sharp edge), not a wall
+        idx = np.flatnonzero(ok)
+        cand = idx[tt < required]
+        relief = _beside_thick(bvh, tri, pts[cand], dirs[cand], t[cand], required, budget, diag)
+        ok[cand[relief]] = False
+        stats["relief_thin_samples"] = int(relief.sum())
+        stats["thin_wall_samples"] = int(ok.sum())
+        if not ok.any():
+            return
+        tt = t[ok]
     i = int(np.argmin(tt))
     where_pt = pts[ok][i]
     stats["min_wall_mm"] = round(float(tt[i]), 4)
@@ -432,6 +444,59 @@ def _thin_walls(bvh: BVH, tri: np.ndarray, normals: np.ndarray, areas: np.ndarra
             severity=sev,  # type: ignore[arg-type]
             where=_where(where_pt, fi, count=int(thin.sum())),
         ))
+
+
+#: in-plane directions probed around a thin spot for thick material beside it
+RELIEF_DIRECTIONS = 8
+
+
+def _beside_thick(bvh: BVH, tri: np.ndarray, pts: np.ndarray, dirs: np.ndarray, t: np.ndarray,
+                  required: float, budget: int, diag: float) -> np.ndarray:
+    """Which thin samples lie within ``required`` of material at least ``required`` thick.
+
+    A sample at ``p`` measured thickness ``t`` along the inward ray ``r``; the
+    material there spans the segment from ``p`` to ``p + t r``. From its
+    midpoint ``m`` the test steps ``required`` (the minimum wall) inside the
+    material in :data:`RELIEF_DIRECTIONS` directions across ``r`` (the
+    segment from ``m`` may not leave the part) and measures the thickness
+    along ``r`` there (both ways). When any of them is at least ``required``,
+    the thin spot is the edge or tip of thicker material: the top of a crest,
+    a spike's tip, a sharp edge, which a printer rounds off by up to its
+    resolution but cannot break, so it is relief, not a wall (the relief's
+    own rule is the minimum feature, which the export holds: saucerfab.relief).
+    A thin wall (a sheet, a fin, a needle) stays thin for more than
+    ``required`` in every direction across it, and stays a wall.
+
+    Args:
+        pts, dirs, t: (K, 3), (K, 3) unit, (K,) the thin samples, their rays and thicknesses.
+        required: the minimum wall, mm.
+
+    Returns:
+        (K,) bool.
+    """
+    k = len(pts)
+    if k == 0:
+        return np.zeros(0, bool)
+    # two unit vectors across each ray
+    helper = np.where(np.abs(dirs[:, 2:3]) < 0.9, np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]]))
+    e1 = np.cross(dirs, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(dirs, e1)
+    ang = 2 * np.pi * np.arange(RELIEF_DIRECTIONS) / RELIEF_DIRECTIONS
+    across = (np.cos(ang)[None, :, None] * e1[:, None, :] + np.sin(ang)[None, :, None] * e2[:, None, :]).reshape(-1, 3)
+    mid = np.repeat(pts + 0.5 * t[:, None] * dirs, RELIEF_DIRECTIONS, axis=0)
+    ray = np.repeat(dirs, RELIEF_DIRECTIONS, axis=0)
+    none = np.full(len(mid), -1, np.int64)
+    t_min = 1e-7 * diag
+    share = max(budget // 4, 1)
+    # the step from the midpoint must stay inside the part
+    exit_t, _, _ = bvh.first_hits(tri, mid, across, none, t_min=t_min, budget=share, workers=_workers())
+    inside = exit_t > required
+    probe = mid + required * across
+    up, _, _ = bvh.first_hits(tri, probe, ray, none, t_min=t_min, budget=share, workers=_workers())
+    down, _, _ = bvh.first_hits(tri, probe, -ray, none, t_min=t_min, budget=share, workers=_workers())
+    thick = inside & np.isfinite(up) & np.isfinite(down) & (up + down >= required)
+    return thick.reshape(k, RELIEF_DIRECTIONS).any(axis=1)
 
 
 def _manifold3d(Vu: np.ndarray, F: np.ndarray, out: list[Finding], stats: dict[str, Any]) -> None:

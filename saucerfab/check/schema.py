@@ -50,6 +50,7 @@ STATS_SCHEMA: dict[str, Any] = {
         "min_wall_required_mm": _NUM_OR_NULL,
         "thin_wall_samples": {"type": "integer", "minimum": 0},
         "thin_wall_fraction": _NUM_OR_NULL,
+        "relief_thin_samples": {"type": "integer", "minimum": 0},
         "manifold3d_status": {"type": ["string", "null"]},
         "textures": {
             "type": "array",

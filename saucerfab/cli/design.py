@@ -15,6 +15,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--height-scale", type=float, default=0.1, help="model units per unit of a shape file")
     p.add_argument("--scene", default="paper", help="scene TOML or preset (default: paper)")
     p.add_argument("--cup", help="cup override: circle[:R], ellipse:A,B[,ROT], prism:N[,R[,ROT]]")
+    p.add_argument(
+        "--printer",
+        default="j55",
+        help="printer the design is made for: a profile name (see 'saucerfab printers') or a .toml; the "
+        "relief is kept within its minimum feature and a part that cannot fit it is refused now (default j55)",
+    )
+    p.add_argument(
+        "--cup-diameter-mm",
+        type=float,
+        help="the real cup's width across its footprint in mm: the design's physical scale (default: the "
+        "scene's, 80)",
+    )
     p.add_argument("-o", "--out", required=True, help="design folder to write (an existing design needs --force)")
     p.add_argument("--force", action="store_true", help="replace the design already in --out")
     p.add_argument("--resolution", type=int, help="heightfield vertices per side (default 150)")
@@ -98,7 +110,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--no-verify",
         action="store_true",
-        help="skip the quick verify of a trial export (J55, the scene's cup) that shows in the design's report.html",
+        help="skip the quick verify of a trial export (for --printer, OBJ) that shows in the design's report.html",
     )
 
 
@@ -178,6 +190,8 @@ def run(args: argparse.Namespace) -> int:
         **({"enhancement": args.enhancement} if args.enhancement is not None else {}),
         **({"fit": args.fit} if args.fit is not None else {}),
         **({"background": args.background} if args.background is not None else {}),
+        printer=args.printer,
+        cup_diameter_mm=args.cup_diameter_mm,
         prism_placement=args.prism_placement,
         color_init=args.color_init,
         record_times=not args.no_times,
@@ -216,8 +230,19 @@ def run(args: argparse.Namespace) -> int:
         "(the stages' E_visual is against their blur-matched, often enhanced, targets), max |h - z| "
         f"{m['max_abs_height_change']:.4f} (delta {meta['scene']['saucer']['delta']}), {total}"
     )
+    pt = meta.get("parameters", {}).get("print_target") or {}
+    pm = m.get("printable") or {}
+    if pt:
+        moved = pm.get("projection_active", 0)
+        left = pm.get("thin_crest_vertices", 0) + pm.get("thin_wall_crest_vertices", 0)
+        rule = (f"the optimizer blunted crests on {moved} of its {pm.get('projection_calls', 0)} trial steps"
+                if moved else "no crest came near them")
+        rule += "; none is left" if not left else f"; {left} crest vertices are still under them"
+        print(f"  made for {pt['printer_name']}, cup diameter {pt['cup_diameter_mm']:g} mm ({pt['mm_per_unit']:g} mm "
+              f"per unit, relief +-{pt['delta_mm']:.2f} mm): minimum feature {pt['min_feature_mm']:g} mm and wall "
+              f"{pt['min_wall_mm']:g} mm; {rule}")
     if verified is not None:
-        print(f"  verified a trial export (J55, OBJ) at {verified.res} px:")
+        print(f"  verified a trial export ({args.printer}, OBJ) at {verified.res} px:")
         for v in verified.files[0].views:
             psnr = "  -- " if v.psnr_db != v.psnr_db else f"{v.psnr_db:4.1f}"
             print(f"    {v.view:10s} from the {v.eye:6s} eye  {psnr} dB, {v.coverage * 100:3.0f}% of the frame"
@@ -238,7 +263,7 @@ def _verify(out, args: argparse.Namespace):  # type: ignore[no-untyped-def]
             print(f"[verify {fraction * 100:5.1f}%] {msg}", file=sys.stderr, flush=True)
 
     try:
-        return verify_design(out, record_times=not args.no_times, progress=progress)
+        return verify_design(out, printer=args.printer, record_times=not args.no_times, progress=progress)
     except SaucerfabError as exc:  # the design itself is complete; say why it was not verified
         print(f"  note: the design is not verified: {exc}", file=sys.stderr)
         return None

@@ -52,6 +52,11 @@ class PrinterProfile:
     thin_policy: str = "warn"
     notes: str = ""
 
+    def fits(self, bbox_mm: tuple[float, float, float]) -> bool:
+        """Whether a part of bounding box ``bbox_mm`` (x, y, z) fits the build volume, turned about z as needed (z stays up)."""
+        (a, b), (p, q) = sorted(bbox_mm[:2]), sorted(self.build_volume_mm[:2])
+        return a <= p and b <= q and bbox_mm[2] <= self.build_volume_mm[2]
+
     def texture_px_for(self, size_mm: float) -> int:
         """Atlas edge in pixels for a part ``size_mm`` across, at this dpi (power of two, capped)."""
         want = size_mm / 25.4 * self.dpi

@@ -57,6 +57,7 @@ from saucerfab.errors import MeshError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.profiles import PrinterProfile
 from saucerfab.heightfield import make_grid, triangulate
+from saucerfab.relief import WALL_MARGIN, crest_widths, wall_widths
 
 #: manifold's merge tolerance, mm: far below printer resolution, far above
 #: the 10 nm rounding of written coordinates, so no two distinct vertices
@@ -154,44 +155,6 @@ class Solid:
 
 
 # --------------------------------------------------------------------------- checks
-
-
-def crest_widths(heights_mm: np.ndarray, dx_mm: float, dy_mm: float, min_height_mm: float) -> np.ndarray:
-    """Width at half prominence of each crest vertex, mm; ``inf`` where none.
-
-    A vertex is a crest along a mesh line (x, y or the cell diagonal) when it
-    rises at least ``min_height_mm`` above both neighbours on that line (a
-    lower crest is below what a printer resolves anyway). With the faces
-    linear, the crest's cross-section at half its prominence
-    ``p = h - max(h_a, h_b)`` reaches ``L * (p/2) / (h - h_n)`` towards each
-    neighbour ``n`` at distance ``L``; the width is the sum of both sides and
-    the result is the smallest over the three lines. A symmetric single-vertex
-    spike is one grid spacing wide at half height.
-
-    Args:
-        heights_mm: (N, N) heights in mm, rows along y.
-        dx_mm, dy_mm: grid spacing along x (columns) and y (rows), mm.
-        min_height_mm: prominence below which a crest is ignored.
-
-    Returns:
-        (N, N) float64 widths in mm (``inf`` for non-crests and the border).
-    """
-    h = np.asarray(heights_mm, np.float64)
-    width = np.full(h.shape, np.inf)
-    c = h[1:-1, 1:-1]
-    lines = (
-        (h[1:-1, :-2], h[1:-1, 2:], dx_mm),  # along x
-        (h[:-2, 1:-1], h[2:, 1:-1], dy_mm),  # along y
-        (h[:-2, :-2], h[2:, 2:], math.hypot(dx_mm, dy_mm)),  # the triangulation's diagonal
-    )
-    inner = width[1:-1, 1:-1]
-    for a, b, length in lines:
-        p = c - np.maximum(a, b)
-        crest = p >= min_height_mm
-        with np.errstate(divide="ignore", invalid="ignore"):
-            w = length * 0.5 * p * (1.0 / (c - a) + 1.0 / (c - b))
-        inner[...] = np.where(crest, np.minimum(inner, w), inner)
-    return width
 
 
 def check_features(
@@ -364,6 +327,39 @@ def _cross_section(poly: np.ndarray):  # -> manifold3d.CrossSection
 # --------------------------------------------------------------------------- build
 
 
+def _blunt_for(
+    profile: PrinterProfile, design: Design, hmm: np.ndarray, xs: np.ndarray, ys: np.ndarray, s: float
+) -> tuple[np.ndarray, str]:
+    """``hmm`` with the crests under ``profile``'s minimum feature blunted, and what was done.
+
+    A design made for this printer has none (the optimizer keeps them out,
+    :mod:`saucerfab.optimize.printable`); one made for a finer printer (or
+    before designs knew their printer) is adapted here with the same rule and
+    the same moves, within the design's height bound, and the export says so.
+    The printer would blunt those crests anyway; doing it in the file makes the
+    part meet the profile, and ``saucerfab verify`` measures what it costs.
+
+    Returns:
+        (blunted heights (N, N) mm, a warning; "" when nothing changed).
+    """
+    from saucerfab.relief import blunt_thin_crests
+
+    dx, dy = float(xs[1] - xs[0]), float(ys[1] - ys[0])
+    base = np.asarray(design.base_heights, np.float64) * s
+    d = design.scene.saucer.delta * s
+    lo, hi = np.minimum(base - d, hmm), np.maximum(base + d, hmm)
+    res = blunt_thin_crests(hmm, dx, dy, profile.min_feature_mm, lo, hi, min_wall=profile.min_wall_mm)
+    if not res.changed:
+        return hmm, ""
+    made_for = str(design.parameters.get("printer") or "no printer (an older design)")
+    return res.heights, (
+        f"{res.changed} relief vertices were moved (at most {res.max_change:.2f} mm) so that no crest is "
+        f"narrower than {profile.name}'s minimum feature {profile.min_feature_mm:g} mm, nor a wall under its "
+        f"minimum wall {profile.min_wall_mm:g} mm; the design was made for {made_for}: design with "
+        f"--printer {profile.key} to let the optimizer account for it"
+    )
+
+
 def _policy(profile: PrinterProfile | None, problems: list[str], warnings: list[str]) -> None:
     """Warn or refuse (``profile.thin_policy``) on below-minimum walls and features."""
     if not problems:
@@ -422,14 +418,25 @@ def build_solid(
                 problems.append(f"{what} = {value:g} mm is below the minimum wall {wall:g} mm")
         if opts.seat != "none" and opts.seat_rim_mm < wall:
             problems.append(f"seat_rim_mm = {opts.seat_rim_mm:g} mm is below the minimum wall {wall:g} mm")
+        hmm, blunted = _blunt_for(profile, design, hmm, xs, ys, s)
+        if blunted:
+            warnings.append(blunted)
         features = check_features(hmm, xs, ys, profile.min_feature_mm)
         if features.count:
             x, y = features.worst_xy_mm or (0.0, 0.0)
             problems.append(
                 f"{features.count} spike/ridge vertices are thinner than the minimum feature "
                 f"{profile.min_feature_mm:g} mm (thinnest {features.min_width_mm:.3f} mm wide at "
-                f"half height, model-mm x={x:.2f} y={y:.2f}); they may print blunted"
+                f"half height, model-mm x={x:.2f} y={y:.2f}) and the design's height bound leaves no room "
+                "to blunt them; they may print blunted"
             )
+        walls = int((wall_widths(hmm, float(xs[1] - xs[0]), float(ys[1] - ys[0]), wall) < WALL_MARGIN * wall).sum())
+        if walls:
+            problems.append(
+                f"{walls} relief crests are walls thinner than {WALL_MARGIN:g} x the minimum wall {wall:g} mm "
+                f"at {wall:g} mm below their tops, and the design's height bound leaves no room to blunt them"
+            )
+        z_bottom = min(-opts.base_thickness_mm, float(hmm.min()) - opts.min_thickness_mm)
         _policy(profile, problems, warnings)
 
     verts, faces, face_id = block_mesh(xs, ys, hmm, z_bottom)

@@ -31,6 +31,7 @@ from saucerfab import __version__
 from saucerfab.design import Design, save_design, sha256_file
 from saucerfab.errors import ConfigError, Interrupted, MaskError
 from saucerfab.fileio import write_bytes_atomic
+from saucerfab.optimize.printable import PrintTarget, preflight, print_target
 from saucerfab.optimize.request import DesignRequest
 from saucerfab.optimize.stages import ABLATION_STAGES, SIGMA_LARGE, WEIGHT_FACTORS, StageSpec, without_enhancement
 from saucerfab.scene import Scene, load_scene, parse_cup_spec
@@ -58,6 +59,8 @@ class Prepared:
             the region overlap of each option.
         enhancement: the conflict reduction chosen: asked, strategy
             (``subject``, ``none`` or ``ablation``) and why (:func:`choose_enhancement`).
+        target: the printer and scale the design is made for.
+        print_notes: what :func:`saucerfab.optimize.printable.preflight` had to say.
     """
 
     scene: Scene
@@ -70,13 +73,17 @@ class Prepared:
     reflected_groups: list[list[int]] | None
     placement: dict[str, Any] | None = None
     enhancement: dict[str, str] | None = None
+    target: PrintTarget | None = None
+    print_notes: tuple[str, ...] = ()
 
 
 def build_scene(request: DesignRequest) -> Scene:
-    """The request's scene with its cup, resolution and image-size overrides."""
+    """The request's scene with its cup, cup diameter, resolution and image-size overrides."""
     scene = load_scene(request.scene)
     if request.cup:
         scene = replace(scene, cup=parse_cup_spec(request.cup))
+    if request.cup_diameter_mm is not None:
+        scene = scene.with_changes(cup_diameter_mm=float(request.cup_diameter_mm))
     if request.resolution is not None:
         scene = replace(scene, saucer=replace(scene.saucer, resolution=int(request.resolution)))
     if request.image_size is not None:
@@ -100,8 +107,10 @@ def prepare(request: DesignRequest) -> Prepared:
             "a second reflected image needs a prism cup (e.g. --cup prism:6): only a prism's "
             f"facets split the reflection into two regions; the scene's cup is a {scene.cup.kind}"
         )
+    target = print_target(scene, request.printer)  # an unknown printer stops here, before any reading
     n = scene.saucer.resolution
-    base = load_shape(request.shape, n, height_scale=request.height_scale, seed=request.seed)
+    base = load_shape(request.shape, n, height_scale=request.height_scale, seed=request.seed, saucer=scene.saucer)
+    print_notes = preflight(target, scene, base)
     groups: list[list[int]] | None = None
     placement: dict[str, Any] = {}
     if request.reflected2 is not None:
@@ -178,7 +187,10 @@ def prepare(request: DesignRequest) -> Prepared:
     else:
         e = im.solid_colour_targets([masks[k] for k in names])
         enhanced = dict(zip(names, e))
-    return Prepared(scene, base, render, texture, enhanced, masks, inputs, groups, placement or None, enhancement)
+    return Prepared(
+        scene, base, render, texture, enhanced, masks, inputs, groups, placement or None, enhancement,
+        target, tuple(print_notes),
+    )
 
 
 def choose_enhancement(request: DesignRequest, problems: list[str], sources: dict[str, str]) -> dict[str, str]:
@@ -321,6 +333,7 @@ def run_design(
 
     from saucerfab.heightfield import laplacian
     from saucerfab.optimize.energies import DeformEnergy, barrier_floor, e_barrier, e_visual
+    from saucerfab.optimize.printable import CrestProjection
     from saucerfab.optimize.solver import ProxSettings, SolverSettings, solve
     from saucerfab.optimize.targets import blur_matched_targets, compatibility, projected_colors
     from saucerfab.optimize.texturing import texture_saucer, visible_faces
@@ -344,6 +357,11 @@ def run_design(
     if prep.enhancement and prep.enhancement["strategy"] == "none":
         stages = without_enhancement(stages)
     ckpt = _Checkpoint(out, request_hash(request, prep))
+    for note in prep.print_notes:
+        print(f"  note: {note}", file=sys.stderr)
+    # the printer's minimum feature and wall, kept on every iterate (saucerfab.relief)
+    target = prep.target
+    project = CrestProjection(target, scene, base) if target is not None else None
 
     # weights from rho (section 3.5) unless given
     t0 = time.perf_counter()
@@ -393,6 +411,8 @@ def run_design(
         # feasibility margin: the barrier is infinite on the boundary, and a
         # colour a hair from it would start with a huge barrier gradient
         c = c.clamp(0.02, 0.98)
+        if project is not None:
+            h = project(h)
 
     mu = request.barrier_weight
     h_e = h.clone()
@@ -436,7 +456,7 @@ def run_design(
             boundary_rule="coordinate" if prox is not None else "global",
         )
         try:
-            res = solve(objective, h, c, z, delta, settings, prox=prox, callback=cb)
+            res = solve(objective, h, c, z, delta, settings, prox=prox, callback=cb, project=project)
         except KeyboardInterrupt:
             # Save the state this stage started from: resuming re-runs the
             # stage from there, which gives exactly the uninterrupted result.
@@ -501,6 +521,8 @@ def run_design(
     }
     metrics["max_abs_height_change"] = float(np.abs(heights - base).max())
     metrics["E_deform"] = float(deform(torch.as_tensor(heights.reshape(-1), dtype=dtype)))
+    if target is not None:
+        metrics["printable"] = printable_metrics(target, heights, project)
     design = Design(
         scene=scene,
         heights=heights,
@@ -508,7 +530,7 @@ def run_design(
         texture=tex.texture,
         face_uvs=tex.face_uvs,
         face_view=tex.face_view,
-        parameters=_parameters(request, weights, rho, stages, prep.enhancement),
+        parameters=_parameters(request, weights, rho, stages, prep.enhancement, target),
         metrics=metrics,
         inputs=prep.inputs,
         # the inputs as meant, at the texture's detail: what verify compares prints with
@@ -555,6 +577,7 @@ def _parameters(
     rho: float,
     stages: list[StageSpec],
     enhancement: dict[str, str] | None,
+    target: PrintTarget | None = None,
 ) -> dict[str, Any]:
     d = asdict(request)
     for k, v in list(d.items()):
@@ -566,4 +589,30 @@ def _parameters(
     d["rho"] = rho
     d["stages"] = [asdict(s) for s in stages]
     d["enhancement_used"] = dict(enhancement or {})
+    if target is not None:
+        d["print_target"] = target.to_dict()
+    if isinstance(d.get("printer"), str) and d["printer"].lower().endswith(".toml"):
+        d["printer"] = Path(d["printer"]).name
     return d
+
+
+def printable_metrics(target: PrintTarget, heights: np.ndarray, project: Any) -> dict[str, Any]:
+    """The final heights against the printer's minimum feature (``metrics.printable`` of design.json)."""
+    from saucerfab.relief import WALL_MARGIN, crest_widths, wall_widths
+
+    dx, dy = target.spacing_mm
+    hmm = np.asarray(heights) * target.mm_per_unit
+    p = target.profile
+    w = crest_widths(hmm, dx, dy, p.min_feature_mm)
+    ww = wall_widths(hmm, dx, dy, p.min_wall_mm)
+    out: dict[str, Any] = {
+        "printer": p.key,
+        "thin_crest_vertices": int((w < p.min_feature_mm).sum()),
+        "narrowest_crest_mm": float(w.min()) if np.isfinite(w).any() else None,
+        "thin_wall_crest_vertices": int((ww < WALL_MARGIN * p.min_wall_mm).sum()),
+        "narrowest_crest_at_min_wall_mm": float(ww.min()) if np.isfinite(ww).any() else None,
+        "crests_can_be_thin": target.crests_can_be_thin,
+    }
+    if project is not None:
+        out.update(project.stats())
+    return out

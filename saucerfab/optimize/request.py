@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,6 +73,12 @@ class DesignRequest:
             (design.json metrics, the energy log, the energies plot's axis).
             False makes the folder byte-identical run to run, as batch jobs
             need; the plot is then over iterations.
+        printer: the printer profile the design is made for (a key such as
+            ``j55``, or a profile .toml): the optimizer keeps the relief within
+            its minimum feature and the design is refused up front when the
+            part cannot fit its build volume (:mod:`saucerfab.optimize.printable`).
+        cup_diameter_mm: the real cup's width across its footprint, mm (None:
+            the scene's, 80); sets the design's physical scale.
         prism_placement: with a second reflected image, "auto" turns the
             prism to the placement whose facet regions overlap least
             (:func:`saucerfab.optimize.regions.best_placement`); "as_given"
@@ -101,6 +108,8 @@ class DesignRequest:
     enhancement: str = "auto"
     fit: str = "pad"
     background: str | None = None
+    printer: str = "j55"
+    cup_diameter_mm: float | None = None
     prism_placement: str = "auto"
     color_init: str = "gray"
     record_times: bool = True
@@ -157,6 +166,11 @@ class DesignRequest:
             raise ConfigError(f"prism_placement must be 'auto' or 'as_given', got {self.prism_placement!r}")
         if self.color_init not in ("gray", "projected"):
             raise ConfigError(f"color_init must be 'gray' or 'projected', got {self.color_init!r}")
+        v = self.cup_diameter_mm
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0):
+            raise ConfigError(f"cup_diameter_mm must be a positive number of millimetres, got {v!r}")
+        if not isinstance(self.printer, str) or not self.printer:
+            raise ConfigError(f"printer must be a profile name such as 'j55' or a .toml path, got {self.printer!r}")
         if self.max_iters < 1:
             raise ConfigError(f"max_iters must be at least 1, got {self.max_iters}")
         if not (self.barrier_weight > 0):

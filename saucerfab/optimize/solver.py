@@ -172,6 +172,7 @@ def solve(
     prox: ProxSettings | None = None,
     callback: Callable[[int, float, dict[str, float]], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
+    project: Callable[[torch.Tensor], torch.Tensor] | None = None,
 ) -> SolveResult:
     """Minimise ``objective`` (+ ``lam * ||h - h^e||_1`` when ``prox``) from a feasible start.
 
@@ -182,6 +183,11 @@ def solve(
         settings: solver settings. prox: the sparse stage's L1 term.
         callback: called after each accepted iteration with (iteration, energy, parts).
         should_stop: polled each iteration (e.g. a time budget); True ends the stage.
+        project: maps trial heights (V,) onto a constraint set the box cannot
+            express (the printer's minimum feature, :mod:`saucerfab.relief`),
+            keeping them inside the box; every trial is projected before it is
+            judged, so every accepted iterate is in the set (projected line
+            search). ``h0`` must already be in it.
 
     Returns:
         The last accepted iterate, detached.
@@ -253,6 +259,8 @@ def solve(
         accepted = False
         for _ in range(s.max_backtracks + 1):
             h_try = h - beta * d_h
+            if project is not None and s.optimize_heights:
+                h_try = project(h_try)
             c_try = c - beta * step_c
             if feasible(h_try, z, c_try, delta):
                 e_try, tot_try, parts_try = full(h_try, c_try)

@@ -1,0 +1,103 @@
+"""The designer's default path, end to end through the CLI, on every bundled sample pair:
+the default design exports for every bundled printer profile with exit 0, in every
+format the profile takes, and ``saucerfab check --strict`` passes on each file.
+
+Small sizes (a 40 x 40 grid, 96 px renders, few iterations; the atlas is the printer's own) keep
+this in CI; the full-size figures are benchmarks/RESULTS.md's (bench_verify.py).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from saucerfab.cli import main as cli
+from saucerfab.fabricate.profiles import list_profiles
+from saucerfab.samples import PAIRS, pair_paths
+
+SMALL = ["--resolution", "40", "--image-size", "96", "--max-iters", "25"]
+MESH_SUFFIXES = (".3mf", ".obj", ".glb", ".ply", ".wrl", ".stl", ".zip")
+PROFILES = sorted(list_profiles())
+
+
+def design(pair: str, out: Path, *extra: str) -> Path:
+    direct, reflected = pair_paths(pair)
+    rc = cli(["design", "--direct", str(direct), "--reflected", str(reflected), "-o", str(out),
+              "--no-verify", "-q", *SMALL, *extra])
+    assert rc == 0, f"design of {pair} failed"
+    return out
+
+
+def export_strict(folder: Path, tmp: Path, capsys: pytest.CaptureFixture[str], *, all_formats: bool = False,
+                  check_cli: bool = False) -> dict[str, dict]:
+    """Export ``folder`` for every bundled profile; every file must pass the checker with no warning.
+
+    The export checks what it writes (the same checker); its findings are held
+    to ``--strict`` here (no error, no warning). ``check_cli`` runs
+    ``saucerfab check --strict`` on the files too, as a CI pipeline would.
+    Returns each export's JSON summary by profile.
+    """
+    import json
+
+    done: dict[str, dict] = {}
+    capsys.readouterr()  # what came before (the design's own lines)
+    for key, prof in list_profiles().items():
+        out = tmp / f"print_{key}"
+        fmts = ["--formats", ",".join(prof.accepted_formats)] if all_formats else []  # else the profile's preferred
+        rc = cli(["export", str(folder), "--printer", key, *fmts, "--no-verify", "--json", "-o", str(out)])
+        captured = capsys.readouterr()
+        assert rc == 0, f"export for {key} failed: {captured.err}"
+        summary = json.loads(captured.out)
+        done[key] = summary
+        for c in summary["checks"]:
+            loud = [f for f in c["findings"] if f["severity"] in ("error", "warning")]
+            assert c["verdict"] == "printable" and not loud, f"{key}: {c['path']}: {loud}"
+        files = sorted(str(p) for p in out.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
+        assert len(files) == (len(prof.accepted_formats) if all_formats else 1)
+        if check_cli:
+            rc = cli(["check", "--strict", "--printer", key, *files])
+            report = capsys.readouterr().out
+            assert rc == 0, f"check --strict for {key} failed:\n{report}"
+    return done
+
+
+@pytest.mark.parametrize("pair", list(PAIRS))
+def test_default_design_of_every_sample_prints_on_every_profile(
+    pair: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert len(PROFILES) >= 5
+    folder = design(pair, tmp_path / "design")
+    export_strict(folder, tmp_path, capsys)
+
+
+def test_the_demo_design_passes_check_strict_in_every_format_of_every_profile(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = design("heart-star", tmp_path / "design")
+    export_strict(folder, tmp_path, capsys, all_formats=True, check_cli=True)
+
+
+def test_a_design_fine_enough_for_thin_crests_is_kept_printable(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # a 40 mm cup on a 56 x 56 grid: 0.91 mm between vertices, under twice the bureau's 0.5 mm
+    # minimum feature, so crests can be too thin there (at 80 mm and 150 x 150 it is 0.67 mm)
+    import json
+
+    fine = ["--cup-diameter-mm", "40", "--resolution", "56"]
+    bureau = design("heart-star", tmp_path / "bureau", "--printer", "bureau", *fine)
+    meta = json.loads((bureau / "design.json").read_text())
+    assert meta["parameters"]["print_target"]["printer"] == "bureau"
+    assert meta["scene"]["cup_diameter_mm"] == 40
+    pm = meta["metrics"]["printable"]
+    assert pm["crests_can_be_thin"] and pm["projection_calls"] > 0
+    assert pm["thin_crest_vertices"] == 0 and pm["thin_wall_crest_vertices"] == 0
+    done = export_strict(bureau, tmp_path / "b", capsys)
+    # made for the strictest profile: no export has anything left to blunt
+    assert not any("relief vertices were moved" in w for d in done.values() for w in d["warnings"])
+    # made for the J55 (feature 0.3 mm, wall 1 mm): the bureau's export (0.5 mm, 2 mm) blunts, and says so
+    j55 = design("heart-star", tmp_path / "j55", *fine)
+    done = export_strict(j55, tmp_path / "j", capsys)
+    assert not any("relief vertices were moved" in w for w in done["j55"]["warnings"])
+    assert any("relief vertices were moved" in w and "--printer bureau" in w for w in done["bureau"]["warnings"])

@@ -1,0 +1,281 @@
+"""Tests of saucerfab.relief (the minimum-feature rule and its projection) and
+saucerfab.optimize.printable (the design's printer: preflight, projection in the optimizer)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from saucerfab.errors import ConfigError
+from saucerfab.fabricate.options import FabOptions
+from saucerfab.optimize.printable import CrestProjection, preflight, print_target, worst_case_bbox_mm
+from saucerfab.relief import PROMINENCE_MARGIN, WALL_MARGIN, blunt_thin_crests, crest_widths, wall_widths
+from saucerfab.scene import Saucer, Scene
+
+# --------------------------------------------------------------------------- the rule
+
+
+def test_crest_width_of_a_symmetric_spike_is_one_spacing() -> None:
+    h = np.zeros((7, 7))
+    h[3, 3] = 5.0
+    w = crest_widths(h, dx=0.4, dy=0.6, min_height=0.1)
+    assert w[3, 3] == pytest.approx(0.4)  # along x; y gives 0.6, the diagonal hypot(0.4, 0.6)
+    assert np.isinf(np.delete(w.ravel(), 3 * 7 + 3)).all()
+
+
+def test_crest_width_of_an_asymmetric_crest() -> None:
+    h = np.zeros((3, 3))
+    h[:, 0], h[:, 1], h[:, 2] = 0.0, 10.0, 5.0  # a ridge along y, steeper on its left
+    w = crest_widths(h, 1.0, 1.0, 0.1)
+    # prominence 5; half height 7.5 is 0.25 to the left and 0.5 to the right
+    assert w[1, 1] == pytest.approx(0.75)
+    # a crest lower than min_height is no feature
+    assert np.isinf(crest_widths(h, 1.0, 1.0, 6.0)[1, 1])
+
+
+def reference_widths(h: np.ndarray, dx: float, dy: float, mf: float) -> np.ndarray:
+    """The rule written out vertex by vertex (the slow, obvious version)."""
+    n, m = h.shape
+    out = np.full(h.shape, np.inf)
+    for i in range(1, n - 1):
+        for j in range(1, m - 1):
+            for (ai, aj), (bi, bj), length in (
+                ((i, j - 1), (i, j + 1), dx),
+                ((i - 1, j), (i + 1, j), dy),
+                ((i - 1, j - 1), (i + 1, j + 1), math.hypot(dx, dy)),
+            ):
+                c, a, b = h[i, j], h[ai, aj], h[bi, bj]
+                hi_n, lo_n = max(a, b), min(a, b)
+                p = c - hi_n
+                if p >= mf:
+                    # half prominence reached at p/2 down each flank, linearly
+                    w = length * (p / 2) / (c - hi_n) + length * (p / 2) / (c - lo_n)
+                    out[i, j] = min(out[i, j], w)
+    return out
+
+
+def test_crest_widths_match_the_reference_on_random_relief() -> None:
+    rng = np.random.default_rng(3)
+    h = rng.gamma(0.5, 1.0, size=(14, 11))
+    np.testing.assert_allclose(crest_widths(h, 0.7, 0.4, 0.6), reference_widths(h, 0.7, 0.4, 0.6), rtol=1e-12)
+
+
+# --------------------------------------------------------------------------- the projection
+
+
+def test_blunting_removes_every_thin_crest_with_small_local_moves() -> None:
+    rng = np.random.default_rng(0)
+    h = rng.normal(0.0, 0.3, size=(30, 30))
+    h[rng.random(h.shape) < 0.05] += 2.0  # needles one vertex wide
+    dx = dy = 0.4  # a symmetric needle is one spacing wide: under the 0.5 minimum
+    mf = 0.5
+    before = crest_widths(h, dx, dy, mf) < mf
+    assert before.sum() > 10
+    res = blunt_thin_crests(h, dx, dy, mf)
+    assert res.remaining == 0
+    assert not (crest_widths(res.heights, dx, dy, mf) < mf).any()
+    moved = res.heights != h
+    assert res.changed == int(moved.sum()) and res.lowered > 0
+    # only thin crests (and what their moves made thin) move, and only down here (no bounds)
+    assert res.raised == 0 and (res.heights[moved] < h[moved]).all()
+    assert moved.sum() < 3 * before.sum()
+    # a blunted crest keeps a prominence just under the threshold
+    i, j = np.argwhere(before)[0]
+    nb = [res.heights[i, j - 1], res.heights[i, j + 1], res.heights[i - 1, j], res.heights[i + 1, j]]
+    assert res.heights[i, j] <= max(nb) + mf
+    # idempotent, and nothing to do where nothing is thin
+    again = blunt_thin_crests(res.heights, dx, dy, mf)
+    assert again.changed == 0 and np.array_equal(again.heights, res.heights)
+
+
+def test_blunting_stays_inside_the_bounds_and_raises_a_neighbour_when_held_up() -> None:
+    h = np.zeros((5, 7))
+    h[2, 3] = 3.0
+    h[2, 2] = 1.0  # a lopsided crest: 0.5 * (1 + 2/3) = 0.83 wide along x
+    lo = h - 0.2  # the crest may come down only 0.2
+    hi = h + 5.0
+    res = blunt_thin_crests(h, 1.0, 1.0, 1.0, lo, hi)
+    assert res.remaining == 0 and res.raised >= 1
+    assert (res.heights >= lo - 1e-12).all() and (res.heights <= hi + 1e-12).all()
+    assert res.heights[2, 3] == pytest.approx(2.8)
+    assert not (crest_widths(res.heights, 1.0, 1.0, 1.0) < 1.0).any()
+
+
+def test_blunting_reports_what_the_bounds_make_impossible() -> None:
+    h = np.zeros((5, 5))
+    h[2, 2] = 3.0
+    res = blunt_thin_crests(h, 0.5, 0.5, 1.0, h - 1e-9, h + 1e-9)
+    assert res.remaining == 1
+    assert np.abs(res.heights - h).max() <= 1.0001e-9
+    assert res.sweeps < 10  # it stops once no move is left, not after MAX_SWEEPS
+
+
+def test_prominence_margin_keeps_the_export_rule_met_after_scaling_to_mm() -> None:
+    h = np.zeros((5, 5))
+    h[2, 2], h[2, 1] = 0.05, 0.0
+    mf_units = 0.5 / 100.0  # 0.5 mm at 100 mm per unit
+    res = blunt_thin_crests(h, 0.0067, 0.0067, mf_units)
+    assert PROMINENCE_MARGIN < 1
+    assert not (crest_widths(res.heights * 100.0, 0.67, 0.67, 0.5) < 0.5).any()
+
+
+# --------------------------------------------------------------------------- the wall rule
+
+
+def reference_wall_widths(h: np.ndarray, dx: float, dy: float, depth: float) -> np.ndarray:
+    """The wall rule written out: walk each line from each vertex until the profile falls ``depth``.
+
+    Like the rule, the walk goes as far as 1.25 minimum walls takes (plus one
+    vertex): a side that has not fallen by then is wide enough (``inf``).
+    """
+    k_max = math.ceil(depth * WALL_MARGIN / min(dx, dy)) + 1
+    n, m = h.shape
+    out = np.full(h.shape, np.inf)
+    for i in range(n):
+        for j in range(m):
+            c = h[i, j]
+            for di, dj, length, wall in ((0, 1, dx, True), (1, 0, dy, True), (1, 1, math.hypot(dx, dy), False)):
+                width = 0.0
+                for side in (1, -1):
+                    prev, extent, k = c, math.inf, 0
+                    while k < k_max:
+                        k += 1
+                        ii, jj = i + side * k * di, j + side * k * dj
+                        if not (0 <= ii < n and 0 <= jj < m):
+                            # beyond the border: a vertical side wall on x / y lines, nothing on the diagonal
+                            extent = length * (k - 1) if wall else math.inf
+                            if not wall:
+                                width = math.inf
+                            break
+                        v = h[ii, jj]
+                        if v > c:
+                            width = math.inf  # rises above the top: no crest on this line
+                            break
+                        if v <= c - depth:
+                            extent = length * (k - 1 + (prev - (c - depth)) / (prev - v))
+                            break
+                        prev = v
+                    width += extent
+                out[i, j] = min(out[i, j], width)
+    return out
+
+
+def test_wall_widths_match_the_reference_walk() -> None:
+    rng = np.random.default_rng(5)
+    h = np.cumsum(rng.normal(0, 0.6, size=(12, 13)), axis=0) + rng.gamma(0.4, 2.0, size=(12, 13))
+    for depth in (0.5, 1.0, 2.0):
+        np.testing.assert_allclose(wall_widths(h, 0.67, 0.5, depth), reference_wall_widths(h, 0.67, 0.5, depth),
+                                   rtol=1e-12)
+
+
+def test_a_tall_needle_is_a_wall_a_short_one_is_not() -> None:
+    h = np.zeros((9, 9))
+    h[4, 4] = 5.0  # 5 mm tall, one 0.67 mm step each side: 0.27 mm wide at 1 mm below its tip
+    w = wall_widths(h, 0.67, 0.67, 1.0)
+    assert w[4, 4] == pytest.approx(2 * 0.67 * 1.0 / 5.0)
+    h[4, 4] = 0.9  # never falls 1 mm: no wall
+    assert np.isinf(wall_widths(h, 0.67, 0.67, 1.0)).all()
+
+
+def test_a_lip_at_the_border_is_a_wall_a_slope_along_it_is_not() -> None:
+    h = np.zeros((6, 6))
+    h[0, :] = 3.0  # the front row stands 3 mm above the inside: a lip against the side wall
+    w = wall_widths(h, 1.0, 1.0, 1.0)
+    assert w[0, 2] == pytest.approx(1.0 / 3.0)  # from the wall to where the slope is 1 mm down
+    # the same heights rising across the border along x: the diagonal leaves through a wall, no lip
+    g = np.tile(np.linspace(0.0, 5.0, 6), (6, 1))
+    assert np.isinf(wall_widths(g, 1.0, 1.0, 1.0)[:, :-1]).all()
+
+
+def test_blunting_with_the_wall_rule_leaves_no_needle_and_no_lip() -> None:
+    rng = np.random.default_rng(1)
+    h = rng.normal(0.0, 0.2, size=(40, 40))
+    h[rng.random(h.shape) < 0.03] += 4.0  # needles
+    h[0, 10:20] += 3.0  # a lip
+    res = blunt_thin_crests(h, 0.67, 0.67, 0.3, min_wall=1.0)
+    assert res.remaining == 0 and res.lowered > 0
+    assert not (wall_widths(res.heights, 0.67, 0.67, 1.0) < WALL_MARGIN * 1.0).any()
+    assert not (crest_widths(res.heights, 0.67, 0.67, 0.3) < 0.3).any()
+    assert (res.heights <= h).all()  # only lowered (no bounds in the way)
+    # the needles keep about the height their width allows, not flattened
+    tallest = float((res.heights - np.median(h)).max())
+    assert 1.0 < tallest < 3.0
+
+
+# --------------------------------------------------------------------------- the design's printer
+
+
+def small_scene(n: int = 40, cup_mm: float = 80.0) -> Scene:
+    s = Scene()
+    return s.with_changes(saucer=replace(s.saucer, resolution=n), cup_diameter_mm=cup_mm)
+
+
+def test_print_target_in_model_units() -> None:
+    t = print_target(small_scene(150), "bureau")
+    assert t.mm_per_unit == pytest.approx(100.0)
+    assert t.min_feature_units == pytest.approx(0.005)
+    assert t.spacing_mm[0] == pytest.approx(100.0 / 149)
+    assert t.delta_mm == pytest.approx(5.0)
+    assert t.crests_can_be_thin  # 0.67 mm grid, 0.5 mm feature
+    assert not print_target(small_scene(150), "j55").crests_can_be_thin  # 0.3 mm: half a spacing is wider
+    d = t.to_dict()
+    assert d["printer"] == "bureau" and d["min_feature_mm"] == 0.5
+    with pytest.raises(ConfigError, match="unknown printer"):
+        print_target(small_scene(), "no_such_printer")
+
+
+def test_preflight_refuses_a_part_larger_than_the_build_volume_and_names_the_cup_that_fits() -> None:
+    scene = small_scene(cup_mm=300.0)
+    base = np.zeros((40, 40))
+    with pytest.raises(ConfigError, match=r"build volume .*--cup-diameter-mm (\d+)") as exc:
+        preflight(print_target(scene, "j55"), scene, base)
+    fit = float(str(exc.value).split("--cup-diameter-mm ")[1].split()[0])
+    smaller = small_scene(cup_mm=fit)
+    assert print_target(smaller, "j55").profile.fits(worst_case_bbox_mm(smaller, base, FabOptions()))
+    assert preflight(print_target(smaller, "j55"), smaller, base) == []
+
+
+def test_preflight_refuses_walls_under_the_printers_minimum() -> None:
+    scene = small_scene()
+    with pytest.raises(ConfigError, match="seat rim 1 mm is under .*minimum wall 2 mm"):
+        preflight(print_target(scene, "bureau"), scene, np.zeros((40, 40)), FabOptions(seat_rim_mm=1.0))
+
+
+def test_preflight_blunts_a_spiky_base_shape_or_refuses_one_it_cannot() -> None:
+    scene = small_scene(150)
+    base = np.zeros((150, 150))
+    base[10, 10], base[10, 9] = 0.04, 0.03  # a lopsided 4 mm needle on a 0.67 mm grid (0.42 mm wide)
+    notes = preflight(print_target(scene, "bureau"), scene, base)
+    assert len(notes) == 1 and "blunted" in notes[0]
+    tight = scene.with_changes(saucer=replace(scene.saucer, delta=1e-6))
+    with pytest.raises(ConfigError, match="crests narrower than .* minimum feature"):
+        preflight(print_target(tight, "bureau"), tight, base)
+
+
+def test_crest_projection_keeps_strict_feasibility_and_counts() -> None:
+    scene = small_scene(150)
+    base = np.zeros((150, 150))
+    proj = CrestProjection(print_target(scene, "bureau"), scene, base)
+    h = torch.zeros(150 * 150, dtype=torch.float32)
+    assert proj(h) is h  # nothing to do: the same tensor back
+    h2 = h.clone()
+    h2[75 * 150 + 75] = 0.0499  # a lopsided needle at the top of the bound
+    h2[75 * 150 + 74] = 0.04
+    out = proj(h2)
+    assert out.dtype == torch.float32 and float(out[75 * 150 + 75]) < 0.0499
+    d = scene.saucer.delta
+    assert float((out - torch.as_tensor(base.reshape(-1), dtype=torch.float32)).abs().max()) < d
+    w = crest_widths(out.numpy().reshape(150, 150).astype(np.float64) * 100.0, *print_target(scene, "bureau").spacing_mm, 0.5)
+    assert not (w < 0.5).any()
+    assert proj.stats()["projection_calls"] == 2 and proj.stats()["projection_active"] == 1
+
+
+def test_saucer_fixture_matches_the_paper() -> None:
+    # the numbers these tests rely on: a 1 x 1 unit saucer, delta 0.05, an 0.8 unit cup
+    s = Scene()
+    assert isinstance(s.saucer, Saucer)
+    assert s.saucer.size == (1.0, 1.0) and s.saucer.delta == 0.05 and s.mm_per_unit == pytest.approx(100.0)
