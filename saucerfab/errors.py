@@ -55,6 +55,10 @@ class ExportError(SaucerfabError):
     """An export format or printer profile cannot be honoured."""
 
 
+class OutputError(SaucerfabError):
+    """An output cannot be written (a full disk, no permission); the message names the path."""
+
+
 class Interrupted(SaucerfabError):
     """The user pressed Ctrl-C; work up to the last checkpoint is kept."""
 

@@ -61,6 +61,10 @@ WALL_MARGIN = 1.25
 #: (the optimizer keeps heights in float32; the bisection ends on the boundary)
 WALL_SLACK = 0.02
 
+#: a crest lowered by the wall rule ends this share of the minimum wall below the
+#: bisection's answer
+SETTLE = 1e-4
+
 #: how much stricter the optimizer holds the rules than the export checks them:
 #: a design's heights are float32 model units, the export's float64 mm, and a
 #: crest may rest exactly on a rule's threshold
@@ -127,7 +131,7 @@ def _wall_steps(depth: float, dx: float, dy: float) -> int:
 
 
 def _walk_width(neighbour: Callable[[int, int], np.ndarray], top: np.ndarray, level: np.ndarray, length: float,
-                k_max: int, plateau: bool = False) -> np.ndarray:
+                k_max: int, plateau: bool = False, rise_tol: float = 0.0) -> np.ndarray:
     """Width at ``level`` of crests of height ``top`` along one line; ``neighbour(side, k)`` gives the heights
     ``k`` vertices away on ``side`` (+1 or -1), shaped like ``top``.
 
@@ -138,6 +142,9 @@ def _walk_width(neighbour: Callable[[int, int], np.ndarray], top: np.ndarray, le
     crest) instead; the projection lowers a crest with this, so that it
     widens the crest rather than slipping a hair under a neighbour as high as
     itself (which would then be the thin crest, and so on, a hair per sweep).
+    ``rise_tol``: a neighbour must be this much above ``top`` to end the crest
+    (the rule jumps there, from a width to "no crest"; the optimizer keeps
+    clear of the jump by more than its float32 rounding).
     """
     width = np.zeros(top.shape)
     for side in (1, -1):
@@ -148,7 +155,7 @@ def _walk_width(neighbour: Callable[[int, int], np.ndarray], top: np.ndarray, le
             n = neighbour(side, k)
             if plateau:
                 n = np.minimum(n, top)
-            higher = ~done & (n > top)
+            higher = ~done & (n > top + rise_tol)
             width[higher] = np.inf  # no crest on this line
             done |= higher
             cross = ~done & (n <= level)
@@ -163,13 +170,14 @@ def _walk_width(neighbour: Callable[[int, int], np.ndarray], top: np.ndarray, le
     return width
 
 
-def wall_widths(heights: np.ndarray, dx: float, dy: float, depth: float) -> np.ndarray:
+def wall_widths(heights: np.ndarray, dx: float, dy: float, depth: float, rise_tol: float = 0.0) -> np.ndarray:
     """Width of each crest at ``depth`` below its top (the wall rule); ``inf`` where it is no crest.
 
     Args:
         heights: (N, M) heights, rows along y.
         dx, dy: grid spacing along x (columns) and y (rows).
         depth: the minimum wall.
+        rise_tol: how far above a crest a neighbour must be to end it (:func:`_walk_width`).
 
     Returns:
         (N, M) float64 widths, the smallest over the three mesh lines, border
@@ -186,17 +194,17 @@ def wall_widths(heights: np.ndarray, dx: float, dy: float, depth: float) -> np.n
             oi, oj = k_max + side * k * _di, k_max + side * k * _dj  # whole shifted views: no gathers
             return _hp[oi:oi + rows, oj:oj + cols]
 
-        out = np.minimum(out, _walk_width(shifted, h, h - depth, _length(which, dx, dy), k_max))
+        out = np.minimum(out, _walk_width(shifted, h, h - depth, _length(which, dx, dy), k_max, rise_tol=rise_tol))
     return out
 
 
 def _lower_until_wide(h: np.ndarray, lo: np.ndarray, dx: float, dy: float, depth: float,
-                      want: float) -> tuple[np.ndarray, np.ndarray]:
+                      want: float, rise_tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Lower each crest narrower than ``want`` at ``depth`` until it is ``WALL_SLACK`` wider (bisection).
 
     Returns (new h, stuck: crests even their lower bound leaves too narrow).
     """
-    thin = wall_widths(h, dx, dy, depth) < want
+    thin = wall_widths(h, dx, dy, depth, rise_tol) < want
     want = want * (1.0 + WALL_SLACK)  # so float32 rounding of the result cannot undo it
     k = _wall_steps(want, dx, dy)
     if not thin.any():
@@ -225,7 +233,10 @@ def _lower_until_wide(h: np.ndarray, lo: np.ndarray, dx: float, dy: float, depth
         lo_top = np.where(w, mid, lo_top)
         hi_top = np.where(w, hi_top, mid)
     out = h.copy()
-    out[ii, jj] = np.where(ok_low, lo_top, np.maximum(lo[ii, jj], lo_top))
+    # a hair lower than the bisection's answer: the rule can jump there (a dip of exactly ``depth``
+    # before a rise ends the crest), and the optimizer's float32 must not round back across it
+    settled = np.maximum(lo[ii, jj], lo_top - SETTLE * depth)
+    out[ii, jj] = np.where(ok_low, settled, np.maximum(lo[ii, jj], lo_top))
     stuck = np.zeros(h.shape, bool)
     stuck[ii[~ok_low], jj[~ok_low]] = True
     return out, stuck
@@ -298,6 +309,7 @@ def blunt_thin_crests(
     feature_w = min_feature * (1.0 + tighten)  # the width a crest of min_feature's prominence must have
     crest_p = min_feature * (1.0 - tighten)  # the prominence that makes a crest
     wall_w = None if min_wall is None else WALL_MARGIN * min_wall * (1.0 + tighten)
+    rise = 0.0 if min_wall is None else tighten * min_wall  # near-equal neighbours belong to the crest
     down = np.zeros(h.shape, bool)
     up = np.zeros(h.shape, bool)
     sweeps = 0
@@ -316,7 +328,7 @@ def blunt_thin_crests(
             thin_any |= thin
             target = np.where(thin, np.minimum(target, m + keep), target)
             raise_to.append((thin, a >= b, length, off))
-        wall_thin = min_wall is not None and bool((wall_widths(h, dx, dy, min_wall) < wall_w).any())
+        wall_thin = min_wall is not None and bool((wall_widths(h, dx, dy, min_wall, rise) < wall_w).any())
         if not thin_any.any() and not wall_thin:
             clean = True
             break
@@ -347,7 +359,7 @@ def blunt_thin_crests(
                 up.reshape(-1)[flat[flat_h[flat] > before]] = True
         if wall_thin:
             before_w = h.copy()
-            h, _ = _lower_until_wide(h, lo_a, dx, dy, min_wall, wall_w)
+            h, _ = _lower_until_wide(h, lo_a, dx, dy, min_wall, wall_w, rise)
             down |= h < before_w
         if np.array_equal(h, prev):  # the bounds hold every thin crest where it is: no way out
             break
@@ -355,7 +367,7 @@ def blunt_thin_crests(
     if not clean:
         bad = crest_widths(h, dx, dy, crest_p) < feature_w
         if min_wall is not None:
-            bad |= wall_widths(h, dx, dy, min_wall) < wall_w
+            bad |= wall_widths(h, dx, dy, min_wall, rise) < wall_w
         remaining = int(bad.sum())
     change = np.abs(h - h0)
     return BluntResult(

@@ -413,7 +413,8 @@ def _thin_walls(bvh: BVH, tri: np.ndarray, normals: np.ndarray, areas: np.ndarra
         # a thin spot beside thick material is relief (a crest, a spike's tip, a sharp edge), not a wall
         idx = np.flatnonzero(ok)
         cand = idx[tt < required]
-        relief = _beside_thick(bvh, tri, pts[cand], dirs[cand], t[cand], required, budget, diag)
+        relief = _beside_thick(bvh, tri, pts[cand], dirs[cand], t[cand], required, budget, diag,
+                               normals[f[cand]] + normals[hit[cand]])
         ok[cand[relief]] = False
         stats["relief_thin_samples"] = int(relief.sum())
         stats["thin_wall_samples"] = int(ok.sum())
@@ -451,7 +452,7 @@ RELIEF_DIRECTIONS = 8
 
 
 def _beside_thick(bvh: BVH, tri: np.ndarray, pts: np.ndarray, dirs: np.ndarray, t: np.ndarray,
-                  required: float, budget: int, diag: float) -> np.ndarray:
+                  required: float, budget: int, diag: float, normal_sum: np.ndarray | None = None) -> np.ndarray:
     """Which thin samples lie within ``required`` of material at least ``required`` thick.
 
     A sample at ``p`` measured thickness ``t`` along the inward ray ``r``; the
@@ -467,9 +468,16 @@ def _beside_thick(bvh: BVH, tri: np.ndarray, pts: np.ndarray, dirs: np.ndarray, 
     A thin wall (a sheet, a fin, a needle) stays thin for more than
     ``required`` in every direction across it, and stays a wall.
 
+    A wedge (the two surfaces meet at an edge, their normals not opposite) is
+    also probed along its bisector, away from the edge: ``-(n1 + n2)``, where
+    the body that carries the edge lies (the directions across the ray can
+    miss it by the wedge's half angle). A sheet's two normals cancel, so it
+    gets no such probe.
+
     Args:
         pts, dirs, t: (K, 3), (K, 3) unit, (K,) the thin samples, their rays and thicknesses.
         required: the minimum wall, mm.
+        normal_sum: (K, 3) the sum of the two surfaces' outward normals at each sample, or None.
 
     Returns:
         (K,) bool.
@@ -483,9 +491,16 @@ def _beside_thick(bvh: BVH, tri: np.ndarray, pts: np.ndarray, dirs: np.ndarray, 
     e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
     e2 = np.cross(dirs, e1)
     ang = 2 * np.pi * np.arange(RELIEF_DIRECTIONS) / RELIEF_DIRECTIONS
-    across = (np.cos(ang)[None, :, None] * e1[:, None, :] + np.sin(ang)[None, :, None] * e2[:, None, :]).reshape(-1, 3)
-    mid = np.repeat(pts + 0.5 * t[:, None] * dirs, RELIEF_DIRECTIONS, axis=0)
-    ray = np.repeat(dirs, RELIEF_DIRECTIONS, axis=0)
+    across = np.cos(ang)[None, :, None] * e1[:, None, :] + np.sin(ang)[None, :, None] * e2[:, None, :]
+    probes = RELIEF_DIRECTIONS
+    if normal_sum is not None:
+        length = np.linalg.norm(normal_sum, axis=1, keepdims=True)
+        bis = np.where(length > 0.1, -normal_sum / np.maximum(length, 1e-12), e1)  # a sheet: one more across
+        across = np.concatenate([across, bis[:, None, :]], axis=1)
+        probes += 1
+    across = across.reshape(-1, 3)
+    mid = np.repeat(pts + 0.5 * t[:, None] * dirs, probes, axis=0)
+    ray = np.repeat(dirs, probes, axis=0)
     none = np.full(len(mid), -1, np.int64)
     t_min = 1e-7 * diag
     share = max(budget // 4, 1)
@@ -496,7 +511,7 @@ def _beside_thick(bvh: BVH, tri: np.ndarray, pts: np.ndarray, dirs: np.ndarray, 
     up, _, _ = bvh.first_hits(tri, probe, ray, none, t_min=t_min, budget=share, workers=_workers())
     down, _, _ = bvh.first_hits(tri, probe, -ray, none, t_min=t_min, budget=share, workers=_workers())
     thick = inside & np.isfinite(up) & np.isfinite(down) & (up + down >= required)
-    return thick.reshape(k, RELIEF_DIRECTIONS).any(axis=1)
+    return thick.reshape(k, probes).any(axis=1)
 
 
 def _manifold3d(Vu: np.ndarray, F: np.ndarray, out: list[Finding], stats: dict[str, Any]) -> None:

@@ -29,7 +29,7 @@ import numpy as np
 
 from saucerfab import __version__
 from saucerfab.design import Design, save_design, sha256_file
-from saucerfab.errors import ConfigError, Interrupted, MaskError
+from saucerfab.errors import ConfigError, Interrupted, MaskError, OutputError
 from saucerfab.fileio import write_bytes_atomic
 from saucerfab.optimize.printable import PrintTarget, preflight, print_target
 from saucerfab.optimize.request import DesignRequest
@@ -553,7 +553,17 @@ def run_design(
     from saucerfab.report_page import REPORT_NAME, design_report
 
     report = design_report(design, previews).encode("utf-8")
-    save_design(design, out, previews=previews, extra_files={"energy_log.jsonl": energy_log, REPORT_NAME: report})
+    try:
+        save_design(design, out, previews=previews, extra_files={"energy_log.jsonl": energy_log, REPORT_NAME: report})
+    except OSError as exc:
+        # nothing half-written is left (save_design writes a temporary folder and renames it);
+        # the finished stages stay in the checkpoint, so no work is lost
+        raise OutputError(
+            f"cannot write the design folder {str(out)!r}: {exc.strerror or exc}"
+            + (f" ({exc.filename})" if exc.filename else "")
+            + f"; the optimised state is kept in {str(ckpt.dir)!r}: free space (or fix the folder) and run "
+            "the same command again to finish without optimising again"
+        ) from None
     ckpt.clear()
     return out
 
