@@ -590,3 +590,28 @@ def test_obj_without_its_material_library(tmp_path: Path) -> None:
     (tmp_path / "m.mtl").unlink()
     r = check_mesh(p)
     assert "texture_missing" in codes(r, "error") and "material library" in r.reason()
+
+
+def test_every_face_of_zero_area_and_coloured_is_judged_not_a_crash(tmp_path: Path) -> None:
+    # issue 15: three collinear coloured vertices gave internal_error: IndexError in the colour checks
+    V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    F = np.array([[0, 1, 2]])
+    r = check_mesh(fx.write_ply(tmp_path / "line.ply", V, F, colors=True))
+    assert "internal_error" not in codes(r)
+    assert r.stats["coloured_fraction"] == 1.0 and "partly_coloured" not in codes(r)
+
+
+def test_obj_statements_continued_with_a_backslash_are_joined(tmp_path: Path) -> None:
+    # issue 15: Rhino continues long face lines with a trailing backslash; that was "not an index"
+    V, F = fx.box()
+    lines = [f"v {x:.4f} {y:.4f} {z:.4f}" for x, y, z in V]
+    for a, b, c in F + 1:
+        lines.append(f"f {a} \\\n  {b} {c}")
+    p = tmp_path / "rhino.obj"
+    p.write_text("\n".join(lines) + "\n")
+    r = check_mesh(p)
+    assert r.verdict == "printable" and r.stats["triangles"] == len(F)
+    assert "continued_lines" in codes(r, "info")
+    crlf = tmp_path / "rhino_crlf.obj"
+    crlf.write_bytes(p.read_bytes().replace(b"\n", b"\r\n"))
+    assert check_mesh(crlf).stats["triangles"] == len(F)

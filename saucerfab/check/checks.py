@@ -628,7 +628,7 @@ def _colour_checks(md: MeshData, areas: np.ndarray, Fo: np.ndarray, centroids: n
                     where={"entry": t.name},
                 ))
     m = len(Fo)
-    total = float(areas.sum()) or 1.0
+    total = float(areas.sum())
     coloured = np.zeros(m, dtype=bool) if md.face_colour is None else md.face_colour.copy()
     if md.face_texture is not None and md.corner_uv is not None:
         textured = md.face_texture >= 0
@@ -650,13 +650,16 @@ def _colour_checks(md: MeshData, areas: np.ndarray, Fo: np.ndarray, centroids: n
                 where=_where(centroids[fb[0]], fb, count=len(fb)),
             ))
         _texture_dpi(md, areas, textured, profile, limits, out, stats)
-    frac = float(areas[coloured].sum()) / total if m else 0.0
+    if total > 0:
+        frac = float(areas[coloured].sum()) / total
+    else:  # no face has area (all degenerate, reported above): the share of faces instead
+        frac = float(coloured.mean()) if m else 0.0
     stats["coloured_fraction"] = round(frac, 5)
     if not md.colour_kinds:
         if md.format in _COLOUR_CAPABLE or profile is not None:
             out.append(finding("no_colour", f"the {md.format.upper()} carries no colour (no texture, vertex or "
                                             "material colours): it prints in the printer's default colour"))
-    elif frac < 0.999:
+    elif frac < 0.999 and (~coloured).any():
         un = np.flatnonzero(~coloured)
         out.append(finding(
             "partly_coloured",

@@ -100,6 +100,7 @@ CODES: dict[str, tuple[str, str]] = {
     "extension_mismatch": ("warning", "the file's content is a different format than its name says"),
     "ignored_content": ("warning", "parts of the file the checker skipped (points, lines, unknown nodes)"),
     "units": ("info", "the units the file states or that were assumed"),
+    "continued_lines": ("info", "OBJ statements continued on the next line with a trailing backslash, joined"),
     "from_archive": ("info", "the mesh was read from inside a zip (an OBJ + MTL + PNG upload bundle, say)"),
     "fits_rotated": ("info", "fits the build volume only with its axes swapped"),
     "check_partial": ("info", "a check stopped at a work limit; its result covers part of the mesh"),

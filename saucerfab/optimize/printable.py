@@ -165,6 +165,9 @@ def preflight(target: PrintTarget, scene: Scene, base: np.ndarray, options: FabO
             "raise it in the export options"
         )
     notes: list[str] = []
+    sliver = _seat_sliver_note(target, scene, opts)
+    if sliver:
+        notes.append(sliver)
     res = CrestProjection(target, scene, base).blunt(base)
     if res.remaining:
         raise ConfigError(
@@ -179,6 +182,34 @@ def preflight(target: PrintTarget, scene: Scene, base: np.ndarray, options: FabO
             f"the optimizer starts from them blunted (at most {res.max_change * target.mm_per_unit:.2f} mm)"
         )
     return notes
+
+
+def _seat_sliver_note(target: PrintTarget, scene: Scene, options: FabOptions) -> str:
+    """A warning when the cup's seat plate would run down the saucer's sides as a sliver, or "".
+
+    The plate is the hull of the cup's footprint (grown by clearance and rim)
+    and the saucer's, less the saucer's (fabricate/solid.py). When the grown
+    footprint reaches past the saucer's sides, the hull's edge runs from it to
+    the saucer's far corners just outside the side walls: a sliver that tapers
+    to nothing, thinner than any minimum wall along part of its length.
+    """
+    if options.seat == "none":
+        return ""
+    s = target.mm_per_unit
+    grow = options.seat_clearance_mm + options.seat_rim_mm
+    r_u = scene.cup.circumradius
+    x0, x1 = scene.saucer.x_range
+    side_u = min(-x0, x1)  # the cup stands at x = 0
+    if r_u * s + grow <= side_u * s + 1e-9:
+        return ""
+    over = r_u * s + grow - side_u * s
+    fits = f"--cup-diameter-mm {math.ceil(2 * r_u * grow / (side_u - r_u) - 1e-9)} or more, or " if side_u > r_u else ""
+    return (
+        f"the cup's seat (its footprint grown by {grow:g} mm of clearance and rim) reaches {over:.2f} mm past the "
+        f"saucer's sides, so the seat plate runs down them as a sliver thinner than {target.profile.name}'s "
+        f"minimum wall {target.profile.min_wall_mm:g} mm (exports will warn of thin walls); use "
+        f"{fits}export with a smaller --seat-rim-mm or --seat none"
+    )
 
 
 @dataclass

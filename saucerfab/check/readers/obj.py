@@ -126,6 +126,11 @@ def read_obj(path: Path, data: bytes, limits: Limits, res: Resources | None = No
     """Read an OBJ file's bytes; its MTL and textures come from ``res`` (default: beside ``path``)."""
     res = res or DiskResources(path.parent, limits)
     b = MeshBuilder("obj", limits)
+    if b"\\\n" in data or b"\\\r\n" in data:
+        # a statement continued on the next line with a trailing backslash (the OBJ spec allows it;
+        # Rhino writes long faces so): join the lines first, so every count and parse sees one statement
+        data = data.replace(b"\\\r\n", b" ").replace(b"\\\n", b" ")
+        b.note("continued_lines", "OBJ statements continued with a trailing backslash were joined")
     counts = _count_statements(data, {b"v": limits.max_vertices, b"vt": limits.max_vertices, b"f": limits.max_triangles})
     nv, nvt, nf = counts[b"v"], counts[b"vt"], counts[b"f"]
     b.reserve(nv, nf, "the OBJ")
