@@ -615,3 +615,37 @@ def test_obj_statements_continued_with_a_backslash_are_joined(tmp_path: Path) ->
     crlf = tmp_path / "rhino_crlf.obj"
     crlf.write_bytes(p.read_bytes().replace(b"\n", b"\r\n"))
     assert check_mesh(crlf).stats["triangles"] == len(F)
+
+
+def test_gltf_integers_written_as_floats_are_integers(tmp_path: Path) -> None:
+    # issue 15: JSON has one number type; `"POSITION": 0.0` is an index to the glTF-Validator too
+    import base64
+    import json as _json
+
+    V, F = fx.box()
+    pos = V.astype("<f4").tobytes()
+    idx = F.astype("<u4").tobytes()
+    doc = {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": len(pos) + len(idx),
+                     "uri": "data:application/octet-stream;base64," + base64.b64encode(pos + idx).decode()}],
+        "bufferViews": [{"buffer": 0.0, "byteOffset": 0, "byteLength": len(pos)},
+                        {"buffer": 0, "byteOffset": float(len(pos)), "byteLength": len(idx)}],
+        "accessors": [
+            {"bufferView": 0.0, "componentType": 5126.0, "count": float(len(V)), "type": "VEC3",
+             "min": V.min(axis=0).tolist(), "max": V.max(axis=0).tolist()},
+            {"bufferView": 1, "componentType": 5125, "count": F.size, "type": "SCALAR"},
+        ],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0.0}, "indices": 1.0}]}],
+        "nodes": [{"mesh": 0.0}],
+        "scenes": [{"nodes": [0.0]}],
+        "scene": 0.0,
+    }
+    p = tmp_path / "floats.gltf"
+    p.write_text(_json.dumps(doc))
+    r = check_mesh(p)
+    assert r.verdict == "printable", [f.message for f in r.findings]
+    assert r.stats["triangles"] == len(F)
+    doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = 0.5  # a fraction is still refused
+    p.write_text(_json.dumps(doc))
+    assert check_mesh(p).verdict == "unreadable"

@@ -54,16 +54,32 @@ def _dict(v: Any, what: str) -> dict[str, Any]:
     return v
 
 
+def _whole(v: Any) -> int | None:
+    """``v`` as an int when it is a JSON integer, written as ``3`` or ``3.0`` (JSON has one number type,
+    and the glTF-Validator takes both); else None (booleans, fractions, strings, inf/nan)."""
+    if isinstance(v, bool):
+        return None
+    if isinstance(v, int):
+        return v
+    if isinstance(v, float) and v.is_integer():
+        return int(v)
+    return None
+
+
 def _int(d: dict[str, Any], key: str, default: int | None = None, what: str = "") -> int:
-    v = d.get(key, default)
-    if isinstance(v, bool) or not isinstance(v, int):
+    v = _whole(d.get(key, default))
+    if v is None:
         raise _bad(f"{what or key}: '{key}' is missing or not an integer")
     if v < 0:
         raise _bad(f"{what or key}: '{key}' is negative")
     return v
 
 
-def _item(seq: list[Any], i: int, what: str) -> dict[str, Any]:
+def _item(seq: list[Any], i: Any, what: str) -> dict[str, Any]:
+    j = _whole(i)
+    if j is None:
+        raise _bad(f"a {what} index {i!r} is not an integer")
+    i = j
     if not 0 <= i < len(seq):
         raise ReadError("index_out_of_range", f"glTF: {what} {i} does not exist (there are {len(seq)})")
     return _dict(seq[i], f"{what} {i}")
@@ -197,10 +213,10 @@ class _Gltf:
         scenes = _list(self.doc, "scenes")
         if scenes:
             si = _int(self.doc, "scene", 0, "document")
-            roots = _list(_item(scenes, si, "scene"), "nodes")
-            for r in roots:
-                if not isinstance(r, int):
-                    raise _bad("a scene lists a node that is not an index")
+            listed = _list(_item(scenes, si, "scene"), "nodes")
+            roots = [_whole(r) for r in listed]
+            if any(r is None for r in roots):
+                raise _bad("a scene lists a node that is not an index")
             self._check_cost(nodes, roots)
             for r in roots:
                 self._node(nodes, r, np.eye(4), 0, set())
@@ -263,8 +279,9 @@ class _Gltf:
             t, v, p = mesh_memo[mi]
         visits = 1
         path.add(i)
-        for c in _list(n, "children"):
-            if not isinstance(c, int):
+        for child in _list(n, "children"):
+            c = _whole(child)
+            if c is None:
                 raise _bad(f"node {i} has a child that is not an index")
             ct, cv, cp, cn = self._node_cost(nodes, c, depth + 1, path, memo, mesh_memo)
             t, v, p, visits = t + ct, v + cv, p + cp, visits + cn
@@ -308,8 +325,9 @@ class _Gltf:
         M = parent @ _node_matrix(n, i)
         if "mesh" in n:
             self._mesh(_list(self.doc, "meshes"), _int(n, "mesh", what=f"node {i}"), M)
-        for c in _list(n, "children"):
-            if not isinstance(c, int):
+        for child in _list(n, "children"):
+            c = _whole(child)
+            if c is None:
                 raise _bad(f"node {i} has a child that is not an index")
             self._node(nodes, c, M, depth + 1, path | {i})
 
