@@ -199,12 +199,16 @@ def wall_widths(heights: np.ndarray, dx: float, dy: float, depth: float, rise_to
 
 
 def _lower_until_wide(h: np.ndarray, lo: np.ndarray, dx: float, dy: float, depth: float,
-                      want: float, rise_tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                      want: float, rise_tol: float = 0.0,
+                      widths: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Lower each crest narrower than ``want`` at ``depth`` until it is ``WALL_SLACK`` wider (bisection).
 
+    ``widths``: :func:`wall_widths` of ``h`` when the caller has them (they are not computed again).
     Returns (new h, stuck: crests even their lower bound leaves too narrow).
     """
-    thin = wall_widths(h, dx, dy, depth, rise_tol) < want
+    if widths is None:
+        widths = wall_widths(h, dx, dy, depth, rise_tol)
+    thin = widths < want
     want = want * (1.0 + WALL_SLACK)  # so float32 rounding of the result cannot undo it
     k = _wall_steps(want, dx, dy)
     if not thin.any():
@@ -328,7 +332,9 @@ def blunt_thin_crests(
             thin_any |= thin
             target = np.where(thin, np.minimum(target, m + keep), target)
             raise_to.append((thin, a >= b, length, off))
-        wall_thin = min_wall is not None and bool((wall_widths(h, dx, dy, min_wall, rise) < wall_w).any())
+        # the wall rule's widths, computed once per sweep (this runs on every trial step of the optimizer)
+        ww = None if min_wall is None else wall_widths(h, dx, dy, min_wall, rise)
+        wall_thin = ww is not None and bool((ww < wall_w).any())
         if not thin_any.any() and not wall_thin:
             clean = True
             break
@@ -359,7 +365,9 @@ def blunt_thin_crests(
                 up.reshape(-1)[flat[flat_h[flat] > before]] = True
         if wall_thin:
             before_w = h.copy()
-            h, _ = _lower_until_wide(h, lo_a, dx, dy, min_wall, wall_w, rise)
+            # the widths still hold when the feature pass moved nothing
+            h, _ = _lower_until_wide(h, lo_a, dx, dy, min_wall, wall_w, rise,
+                                     widths=None if thin_any.any() else ww)
             down |= h < before_w
         if np.array_equal(h, prev):  # the bounds hold every thin crest where it is: no way out
             break

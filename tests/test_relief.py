@@ -241,7 +241,7 @@ def test_preflight_refuses_a_part_larger_than_the_build_volume_and_names_the_cup
 
 def test_preflight_refuses_walls_under_the_printers_minimum() -> None:
     scene = small_scene()
-    with pytest.raises(ConfigError, match="seat rim 1 mm is under .*minimum wall 2 mm"):
+    with pytest.raises(ConfigError, match="seat_rim_mm = 1 mm is below the minimum wall 2 mm"):
         preflight(print_target(scene, "bureau"), scene, np.zeros((40, 40)), FabOptions(seat_rim_mm=1.0))
 
 

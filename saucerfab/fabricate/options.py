@@ -115,6 +115,20 @@ class FabOptions:
         if not isinstance(self.coord_decimals, int) or not 3 <= self.coord_decimals <= 9:
             raise ConfigError(f"coord_decimals must be an integer in [3, 9], got {self.coord_decimals!r}")
 
+    def walls_under(self, min_wall_mm: float) -> list[str]:
+        """What of the solid's own walls (base, material under the saucer, seat rim) is under ``min_wall_mm``.
+
+        One rule for the export (``fabricate/solid.py``) and the design's
+        preflight (``optimize/printable.py``); each string names the option.
+        """
+        walls = [
+            ("base_thickness_mm", self.base_thickness_mm),
+            ("min_thickness_mm (under the saucer's lowest point)", self.min_thickness_mm),
+        ]
+        if self.seat != "none":
+            walls.append(("seat_rim_mm", self.seat_rim_mm))
+        return [f"{what} = {v:g} mm is below the minimum wall {min_wall_mm:g} mm" for what, v in walls if v < min_wall_mm]
+
     def to_dict(self) -> dict[str, Any]:
         """Plain data (JSON-ready)."""
         d = asdict(self)

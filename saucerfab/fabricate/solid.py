@@ -410,14 +410,7 @@ def build_solid(
     features = FeatureReport(0, math.inf, None)
     if profile is not None:
         wall = profile.min_wall_mm
-        for what, value in (
-            ("base_thickness_mm", opts.base_thickness_mm),
-            ("min_thickness_mm (under the saucer's lowest point)", opts.min_thickness_mm),
-        ):
-            if value < wall:
-                problems.append(f"{what} = {value:g} mm is below the minimum wall {wall:g} mm")
-        if opts.seat != "none" and opts.seat_rim_mm < wall:
-            problems.append(f"seat_rim_mm = {opts.seat_rim_mm:g} mm is below the minimum wall {wall:g} mm")
+        problems.extend(opts.walls_under(wall))
         hmm, blunted = _blunt_for(profile, design, hmm, xs, ys, s)
         if blunted:
             warnings.append(blunted)

@@ -142,7 +142,7 @@ def preflight(target: PrintTarget, scene: Scene, base: np.ndarray, options: FabO
     p = target.profile
     bbox = worst_case_bbox_mm(scene, base, opts)
     if not p.fits(bbox):
-        # the box is mm_per_unit * A + B per axis; the largest cup that fits
+        # the largest cup that fits, in 1 % steps of the cup asked for
         ratio = 1.0
         for lo_ratio in np.linspace(1.0, 0.05, 96):
             test = scene.with_changes(cup_diameter_mm=target.cup_diameter_mm * float(lo_ratio))
@@ -155,15 +155,9 @@ def preflight(target: PrintTarget, scene: Scene, base: np.ndarray, options: FabO
             f"{bbox[2]:.0f} mm, larger than {p.name}'s build volume {vol} mm; use --cup-diameter-mm "
             f"{math.floor(target.cup_diameter_mm * ratio):g} or less, or another --printer"
         )
-    walls = [("base thickness", opts.base_thickness_mm), ("material under the saucer", opts.min_thickness_mm)]
-    if opts.seat != "none":
-        walls.append(("seat rim", opts.seat_rim_mm))
-    thin = [f"{what} {v:g} mm" for what, v in walls if v < p.min_wall_mm]
+    thin = opts.walls_under(p.min_wall_mm)
     if thin:
-        raise ConfigError(
-            f"{', '.join(thin)} is under {p.name}'s minimum wall {p.min_wall_mm:g} mm; "
-            "raise it in the export options"
-        )
+        raise ConfigError(f"for {p.name}: {'; '.join(thin)}; raise it in the export options")
     notes: list[str] = []
     sliver = _seat_sliver_note(target, scene, opts)
     if sliver:
