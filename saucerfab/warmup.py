@@ -20,6 +20,14 @@ def warm_up() -> list[str]:
     from saucerfab.fabricate.kernels import warm_up as fab_warm_up
 
     done += [f"fabricate.{k}" for k in fab_warm_up()]
+    from saucerfab.check.kernels import warm_up as check_warm_up
+
+    done += [f"check.{k}" for k in check_warm_up()]
+    from saucerfab.check.readers.meshopt import warm_up as meshopt_warm_up
+
+    meshopt_warm_up()
+    done.append("check.meshopt")
+    done += [f"check.{k}" for k in __import__("saucerfab.check.readers.obj_fast", fromlist=["warm_up"]).warm_up()]
 
     import torch
 

@@ -143,6 +143,13 @@ RELS = (
     'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/></Relationships>'
 )
 
+TEXTURE_RELS = (
+    '<?xml version="1.0" encoding="UTF-8"?>\n'
+    '<Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships">'
+    '<Relationship Target="%s" Id="rel1" '
+    'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dtexture"/></Relationships>'
+)
+
 
 def write_3mf(path: Path, V: np.ndarray, F: np.ndarray, *, uv: np.ndarray | None = None,
               texture: bytes | None = None, model: str | None = None, extra: dict[str, bytes] | None = None,
@@ -155,6 +162,8 @@ def write_3mf(path: Path, V: np.ndarray, F: np.ndarray, *, uv: np.ndarray | None
         z.writestr("3D/3dmodel.model", xml)
         if texture is not None:
             z.writestr("3D/Texture/texture.png", texture)
+            # the 3D texture relationship a texture needs (Materials 6; lib3mf refuses a texture without it)
+            z.writestr("3D/_rels/3dmodel.model.rels", TEXTURE_RELS % kw.get("texture_path", "/3D/Texture/texture.png"))
         for name, data in (extra or {}).items():
             z.writestr(name, data)
     return path

@@ -78,6 +78,27 @@ def test_ids_like_the_reports_but_not_them_are_fine(tmp_path: Path) -> None:
     ]
 
 
+@pytest.mark.parametrize("job_id", ["CON", "nul", "Aux.txt", "COM1", "lpt9.tar.gz", "job."])
+def test_a_job_id_windows_cannot_name_is_refused_everywhere(tmp_path: Path, job_id: str) -> None:
+    m = _manifest(tmp_path, HEAD + f'[[job]]\nid = "{job_id}"\ndesign = "d"\n')
+    with pytest.raises(ConfigError, match="cannot name a folder on Windows"):
+        load_manifest(m)
+
+
+def test_ids_that_only_start_like_a_device_are_fine(tmp_path: Path) -> None:
+    text = HEAD + "".join(f'[[job]]\nid = "{i}"\ndesign = "d"\n\n' for i in ("console", "COM10", "nullable.1"))
+    assert [j.id for j in load_manifest(_manifest(tmp_path, text)).jobs] == ["console", "COM10", "nullable.1"]
+
+
+def test_a_printer_profile_nested_too_deeply_is_a_config_error(tmp_path: Path) -> None:
+    from saucerfab.fabricate.profiles import load_profile
+
+    p = tmp_path / "deep.toml"
+    p.write_text('name = "x"\nnotes = ' + "[" * 5000 + "]" * 5000 + "\n")
+    with pytest.raises(ConfigError, match="nests arrays or tables too deeply"):
+        load_profile(p)
+
+
 def test_a_job_id_with_a_trailing_newline_is_refused(tmp_path: Path) -> None:
     m = _manifest(tmp_path, HEAD + '[[job]]\nid = "job\\n"\ndesign = "d"\n')
     with pytest.raises(ConfigError, match="not a valid name"):

@@ -30,10 +30,9 @@ MIB = 1 << 20
 # -- builders (also used by benchmarks/bench_check_hostile.py) -----------------------------------
 
 
-def glb_with(path: Path, edit: Callable[[dict[str, Any]], None]) -> Path:
-    """The tests' box GLB with its JSON changed by ``edit`` (the binary chunk kept)."""
-    g = fx.write_glb(path, *fx.box())
-    data = g.read_bytes()
+def glb_with(path: Path, edit: Callable[[dict[str, Any]], None], src: Path | None = None) -> Path:
+    """The GLB ``src`` (default: the tests' box) with its JSON changed by ``edit`` (the binary chunk kept)."""
+    data = (src or fx.write_glb(path, *fx.box())).read_bytes()
     jlen = struct.unpack_from("<I", data, 12)[0]
     doc = json.loads(data[20 : 20 + jlen])
     rest = data[20 + jlen :]
@@ -320,11 +319,13 @@ def test_obj_huge_index_is_out_of_range_not_a_crash(tmp_path: Path) -> None:
     head = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
     for faces in ("f 1 2 99999999999999999999999\n",  # bulk path
                   "f 1 2 3\nf 1 2 -99999999999999999999999\n",  # line-by-line path (a negative index)
-                  "f 1 2 3 4 99999999999999999999999\nf 1 2 3\n",  # line-by-line path (mixed corner counts)
-                  "f 1/1 2/1 3/99999999999999999999999\nvt 0 0\n"):
+                  "f 1 2 3 4 99999999999999999999999\nf 1 2 3\n"):  # line-by-line path (mixed corner counts)
         p = tmp_path / "big.obj"
         p.write_text(head + faces)
         refused(check_mesh(p), "index_out_of_range")
+    # a texture coordinate the file lacks (however absurd its index) only costs that face its UVs
+    p.write_text(head + "f 1/1 2/1 3/99999999999999999999999\nvt 0 0\n")
+    assert "texcoords_missing" in {f.code for f in check_mesh(p).findings}
 
 
 def test_obj_index_zero_is_out_of_range_on_both_paths(tmp_path: Path) -> None:

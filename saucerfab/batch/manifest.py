@@ -68,6 +68,9 @@ MAX_JOBS = 100_000
 #: job ids name output folders: letters, digits, '.', '_', '-' (matched with
 #: ``fullmatch``: ``$`` alone would also accept a trailing newline)
 ID_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,79}")
+#: names Windows keeps for devices, with or without an extension: no file or folder can have them
+WINDOWS_DEVICES = frozenset({"CON", "PRN", "AUX", "NUL", "CONIN$", "CONOUT$",
+                             *(f"{p}{i}" for p in ("COM", "LPT") for i in (*range(1, 10), "\u00b9", "\u00b2", "\u00b3"))})
 #: deepest nesting of arrays and tables a manifest may hold; a manifest needs 5
 #: (the document, ``[[job]]``, a job, its ``design_options``, a list in it), and
 #: neither the parser nor any later walk of the data may run out of stack
@@ -232,6 +235,11 @@ def _build_job(raw: dict[str, Any], root: Path, where: str) -> JobSpec:
             f"{where}: id {job_id!r} is the name of a file the batch writes in its output folder "
             f"(reserved: {', '.join(sorted(reserved))}); give the job another id"
         )
+    if job_id.split(".")[0].upper() in WINDOWS_DEVICES or job_id.endswith("."):
+        # a folder named CON, nul.txt or 'job.' cannot be made on Windows (a bureau's share, say): refuse
+        # it on every system, so a manifest runs the same everywhere
+        raise ConfigError(f"{where}: id {job_id!r} cannot name a folder on Windows (a device name such as CON, "
+                          "NUL, COM1 or LPT1, or a trailing '.'); give the job another id")
     where = f"{where} (id {job_id!r})"
 
     printer = raw.get("printer")

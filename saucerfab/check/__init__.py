@@ -19,6 +19,10 @@ a bad ``printer`` argument (the caller's mistake, not the file's).
 
 This module imports only the light parts (report, limits); numpy, scipy,
 Pillow and manifold3d load when the first file is checked, and torch never.
+A 3MF package is also read by lib3mf, the 3MF Consortium's reader, in a
+bounded child process (``saucerfab.check.readers.lib3mf_strict``; a fork
+server started with the first 3MF, ~10-20 ms a file); its verdict becomes
+``lib3mf_*`` findings. ``SAUCERFAB_LIB3MF=off`` turns that stage off.
 """
 
 from __future__ import annotations
@@ -99,6 +103,10 @@ def check_mesh(
             return Report.build(spath, fmt, [f], {"file_bytes": file_bytes}, printer=key, strict=strict,
                                 elapsed_s=time.perf_counter() - t0)
         fmt = md.format
+        if fmt == "3mf":  # a 3MF package the bounded reader read: lib3mf's verdict too, in a bounded child process
+            from saucerfab.check.readers.lib3mf_strict import lib3mf_findings
+
+            md.notes.extend(lib3mf_findings(spath, md.notes))
         import numpy as np
 
         from saucerfab.check.checks import run_checks

@@ -21,6 +21,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
+#: meshes with at least this many triangles use the numba kernels of :mod:`saucerfab.check.kernels`
+#: (importing numba costs ~0.7 s of start-up: below this, numpy is done sooner)
+FAST_FROM_TRIANGLES = 200_000
+
+
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise cross product of (n, 3) arrays (np.cross is ~8x slower for this shape)."""
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))
@@ -55,6 +60,10 @@ class BVH:
     leaf_tri: np.ndarray  # (2**D,) triangle index per leaf, -1 for padding
     depth: int
     pairs_complete: bool = field(default=True, compare=False)
+    #: all levels in heap order, (3, 2**(D+1) - 1) float32: ``lo[d]`` is columns 2**d - 1 ... 2**(d+1) - 2
+    #: (the levels above are views of these; the numba kernels take the flat form)
+    flat_lo: np.ndarray | None = field(default=None, compare=False, repr=False)
+    flat_hi: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @classmethod
     def build(cls, tri: np.ndarray) -> BVH:
@@ -84,14 +93,16 @@ class BVH:
         with np.errstate(invalid="ignore", over="ignore"):
             lo = np.where(lo32 > lo.T, np.nextafter(lo32, np.float32(-np.inf)), lo32)
             hi = np.where(hi32 < hi.T, np.nextafter(hi32, np.float32(np.inf)), hi32)
-        los = [lo]
-        his = [hi]
-        for _ in range(depth):
-            lo = np.minimum(lo[:, 0::2], lo[:, 1::2])
-            hi = np.maximum(hi[:, 0::2], hi[:, 1::2])
-            los.append(lo)
-            his.append(hi)
-        return cls(lo=los[::-1], hi=his[::-1], leaf_tri=leaf_tri, depth=depth)
+        flat_lo = np.empty((3, 2 * P - 1), dtype=np.float32)
+        flat_hi = np.empty((3, 2 * P - 1), dtype=np.float32)
+        los = [flat_lo[:, (1 << d) - 1:(2 << d) - 1] for d in range(depth + 1)]
+        his = [flat_hi[:, (1 << d) - 1:(2 << d) - 1] for d in range(depth + 1)]
+        los[depth][...] = lo
+        his[depth][...] = hi
+        for d in range(depth - 1, -1, -1):
+            np.minimum(los[d + 1][:, 0::2], los[d + 1][:, 1::2], out=los[d])
+            np.maximum(his[d + 1][:, 0::2], his[d + 1][:, 1::2], out=his[d])
+        return cls(lo=los, hi=his, leaf_tri=leaf_tri, depth=depth, flat_lo=flat_lo, flat_hi=flat_hi)
 
     # ---- rays -------------------------------------------------------------
     def first_hits(
@@ -180,6 +191,31 @@ class BVH:
     # ---- pairs ------------------------------------------------------------
     def pair_chunks(self, tol: float, budget: int, chunk: int = 1 << 20) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """Triangle pairs (i, j) whose boxes overlap (padded by ``tol``), in chunks of at most ~``chunk``.
+
+        The numba search (:func:`saucerfab.check.kernels.pair_search`) for a
+        large tree, :meth:`pair_chunks_numpy` below it: the same pairs (in
+        another order) and the same budget rule.
+        """
+        if int((self.leaf_tri >= 0).sum()) < FAST_FROM_TRIANGLES or self.flat_lo is None:
+            yield from self.pair_chunks_numpy(tol, budget, chunk)
+            return
+        from saucerfab.check.kernels import pair_search
+
+        self.pairs_complete = True
+        stack = np.zeros((4 * (self.depth + 2), 3), dtype=np.int64)  # a DFS leaves at most 3 siblings per level
+        state = np.array([1, 0, 0, 12345], dtype=np.int64)  # the root pair (0, 0, level 0) is on the stack
+        while state[0] > 0:
+            out_i = np.empty(chunk, dtype=np.int64)
+            out_j = np.empty(chunk, dtype=np.int64)
+            k = pair_search(self.flat_lo, self.flat_hi, self.depth, self.leaf_tri, np.float32(tol), stack, state,
+                            out_i, out_j, budget)
+            if k:
+                yield out_i[:k], out_j[:k]
+        self.pairs_complete = not state[2]
+
+    def pair_chunks_numpy(self, tol: float, budget: int,
+                          chunk: int = 1 << 20) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """:meth:`pair_chunks` in numpy: the reference, and the quicker start for small meshes.
 
         Depth-first over slices of the frontier, so memory stays at a few
         chunks whatever the mesh size, and the caller can test each chunk

@@ -22,7 +22,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from saucerfab.check.bvh import BVH, cross3, pair_intersections
+from saucerfab.check import bvh as bvh_mod
+from saucerfab.check.bvh import BVH, cross3, dot3, pair_intersections
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import MeshData
 from saucerfab.check.report import Finding, finding
@@ -333,8 +334,19 @@ def _self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndar
     budget = min(limits.max_pair_tests, 100 * m + 1_000_000)
 
     nrm = cross3(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    cull = None
+    if m >= bvh_mod.FAST_FROM_TRIANGLES:
+        # numba clears the pairs that the exact test's first, plane-side stages would (most neighbours),
+        # in one pass without temporaries; the exact test then runs on the few left
+        from saucerfab.check.kernels import needs_exact_test
+
+        nlen = np.sqrt(dot3(nrm, nrm))
+        cull = lambda a, b: needs_exact_test(tri, Fg, nrm, nlen, a, b, eps)  # noqa: E731
 
     def narrow(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        if cull is not None:
+            keep = cull(a, b)
+            a, b = a[keep], b[keep]
         hit = pair_intersections(tri, Fg, nrm, a, b, eps)
         return np.stack([a[hit], b[hit]], axis=1)
 
@@ -364,13 +376,15 @@ def _self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndar
                                             f" = {limits.max_pair_tests:,}, scaled to the mesh): parts of the mesh "
                                             "crowd together so densely that not all pairs were compared"))
     if len(pairs):
-        faces = np.unique(gidx[pairs.ravel()])
-        f0 = int(gidx[pairs[0, 0]])
+        fp = np.sort(gidx[pairs], axis=1)  # file face indices, lower first
+        faces = np.unique(fp.ravel())
+        first = np.lexsort((fp[:, 1], fp[:, 0]))[0]  # the first in file order, whatever order the search took
+        f0, f1 = int(fp[first, 0]), int(fp[first, 1])
         out.append(finding(
             "self_intersections",
             f"{len(pairs):,} pairs of faces cross each other ({len(faces):,} faces), first near "
-            f"{_fmt_pt(centroids[f0])}: faces {f0} and {int(gidx[pairs[0, 1]])}; union or repair the surfaces",
-            where=_where(centroids[f0], [f0, int(gidx[pairs[0, 1]])], count=len(pairs)),
+            f"{_fmt_pt(centroids[f0])}: faces {f0} and {f1}; union or repair the surfaces",
+            where=_where(centroids[f0], [f0, f1], count=len(pairs)),
         ))
 
 

@@ -111,8 +111,8 @@ class MeshBuilder:
         self._noted: set[str] = set()
         self.parts = 0
 
-    def reserve(self, n_vertices: int, n_faces: int, what: str = "") -> None:
-        """Refuse (``over_check_limit``) before allocating a part over the caps."""
+    def reserve(self, n_vertices: int, n_faces: int, what: str = "", *, parts: int = 1) -> None:
+        """Refuse (``over_check_limit``) before allocating ``parts`` more parts (of these sizes in all) over the caps."""
         if self.nf + n_faces > self.limits.max_triangles:
             raise ReadError(
                 "over_check_limit",
@@ -126,7 +126,7 @@ class MeshBuilder:
                 f"{what or 'the file'} would bring the vertex count to {self.nv + n_vertices:,}, over the "
                 f"checker's limit of {self.limits.max_vertices:,} (Limits.max_vertices)",
             )
-        if self.parts + 1 > self.limits.max_parts:
+        if self.parts + parts > self.limits.max_parts:
             raise ReadError("over_check_limit", f"more than {self.limits.max_parts:,} mesh parts (Limits.max_parts)")
 
     def add(
@@ -138,11 +138,12 @@ class MeshBuilder:
         face_texture: np.ndarray | None = None,
         face_colour: np.ndarray | None = None,
         what: str = "",
+        parts: int = 1,
     ) -> None:
-        """Add one part; ``faces`` index into this part's ``vertices``."""
+        """Add one part (or ``parts`` instances at once); ``faces`` index into this call's ``vertices``."""
         vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
         faces = np.asarray(faces).reshape(-1, 3)
-        self.reserve(len(vertices), len(faces), what)
+        self.reserve(len(vertices), len(faces), what, parts=parts)
         if faces.size:
             if not np.issubdtype(faces.dtype, np.integer):
                 raise ReadError("malformed", f"{what or 'face'} indices are not integers")
@@ -166,7 +167,7 @@ class MeshBuilder:
         self._col.append(None if face_colour is None else np.asarray(face_colour, dtype=bool).reshape(m))
         self.nv += len(vertices)
         self.nf += m
-        self.parts += 1
+        self.parts += parts
 
     def texture(self, key: str, load: Any) -> int:
         """Index of texture ``key``, calling ``load() -> TextureInfo`` the first time."""

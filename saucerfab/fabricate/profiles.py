@@ -84,6 +84,9 @@ def _parse(path: Path) -> PrinterProfile:
         d = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"printer profile {str(path)!r} is not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib parses nested arrays recursively: a hostile file exhausts the stack
+        raise ConfigError(f"printer profile {str(path)!r} nests arrays or tables too deeply to read; "
+                          "a profile is a few flat keys") from None
     required = {
         "name", "build_volume_mm", "min_wall_mm", "min_feature_mm", "dpi",
         "max_texture_px", "accepted_formats", "preferred_format",

@@ -14,6 +14,30 @@ glTF specification.
 
 Colour: ``baseColorTexture`` via ``TEXCOORD_n``, ``COLOR_0`` vertex colours
 and ``baseColorFactor`` material colours.
+
+Extensions read (and so accepted in ``extensionsRequired``; any other required
+extension refuses the file as ``unsupported_format``):
+
+* ``KHR_draco_mesh_compression``: the stream's stated face and vertex counts
+  are held against the primitive's accessor counts (already priced against
+  the caps) before DracoPy decodes it, and the decoded mesh again after.
+* ``EXT_meshopt_compression`` / ``KHR_meshopt_compression``: a compressed
+  bufferView is decoded (:mod:`.meshopt`) when an accessor first reads it,
+  its ``count * byteStride`` bytes charged to ``Limits.max_buffer_bytes``
+  before decoding; fallback buffers are never read for such views, so a
+  fallback placeholder without a uri is fine.
+* ``KHR_mesh_quantization``: integer POSITION / TEXCOORD / COLOR, normalized
+  (i8 /127 clamped at -1, u8 /255, i16 /32767, u16 /65535) or not (the
+  integer's value); node transforms carry the dequantization scale.
+* ``KHR_texture_transform`` on ``baseColorTexture`` (offset, rotation, scale,
+  texCoord): applied to the UVs the colour checks see.
+
+Sparse accessors (with or without a bufferView) are read with their counts
+and indices bounded (count at most the accessor's, indices strictly
+increasing and in range). An accessor without a bufferView reads as zeros.
+Primitives without POSITION and points/lines primitives are skipped with an
+``ignored_content`` note; trailing indices of a triangle list that do not
+make a whole triangle are ignored with a note.
 """
 
 from __future__ import annotations
@@ -21,6 +45,7 @@ from __future__ import annotations
 import base64
 import binascii
 import json
+import math
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +60,11 @@ from saucerfab.check.readers.safe import DiskResources, Resources, probe_texture
 _COMPONENT = {5120: "i1", 5121: "u1", 5122: "i2", 5123: "u2", 5125: "u4", 5126: "f4"}
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _NORM = {"i1": 127.0, "u1": 255.0, "i2": 32767.0, "u2": 65535.0}
+_INDEX_TYPES = (5121, 5123, 5125)
+_MESHOPT = ("KHR_meshopt_compression", "EXT_meshopt_compression")
+_DRACO = "KHR_draco_mesh_compression"
+#: extensions the reader reads: a file may require them
+SUPPORTED_EXTENSIONS = frozenset({_DRACO, *_MESHOPT, "KHR_mesh_quantization", "KHR_texture_transform"})
 
 
 def _bad(msg: str) -> ReadError:
@@ -105,14 +135,22 @@ class _Gltf:
         self.limits = limits
         self.b = MeshBuilder("glb", limits)
         self._buf_cache: dict[int, bytes] = {}
+        self._view_cache: dict[int, memoryview] = {}
         # buffers naming the same URI share one read; all URIs together are bounded by Limits.max_buffer_bytes
         self._uri_cache: dict[str, bytes] = {}
         self.buffer_bytes = 0
-        self._prims: dict[int, list[_Prim]] = {}
+        self._prims: dict[int, tuple[_Prim, int] | None] = {}  # mesh -> its primitives merged, and how many
+        self._queue: list[np.ndarray] = []  # transforms of a run of instances of one mesh, not yet added
+        self._queue_mesh = -1
         self.visits = 0
+        self.skipped: list[str] = []  # primitives skipped, for the reason when nothing is left
+
+    def _skip(self, message: str, note: str | None = None) -> None:
+        self.skipped.append(message)
+        self.b.note("ignored_content", note or message)
 
     # ---- data
-    def buffer(self, i: int) -> bytes:
+    def buffer(self, i: int, by: str = "") -> bytes:
         if i in self._buf_cache:
             return self._buf_cache[i]
         bufs = _list(self.doc, "buffers")
@@ -122,7 +160,20 @@ class _Gltf:
         if uri is None:
             data = self.buffers[i] if i < len(self.buffers) else None
             if data is None:
-                raise _bad(f"buffer {i} has no uri and there is no GLB binary chunk for it")
+                exts = d.get("extensions")
+                fallback = isinstance(exts, dict) and any(
+                    isinstance(exts.get(k), dict) and exts[k].get("fallback") for k in _MESHOPT)
+                what = f"glTF buffer {i} ({length:,} bytes{', read by ' + by if by else ''})"
+                if fallback:
+                    raise _bad(f"{what[5:]} is a meshopt fallback placeholder without data; only bufferViews "
+                               "with the meshopt extension may name it")
+                if i == 0 and self.buffers:
+                    raise ReadError("truncated", f"{what} has no uri and the GLB has no binary chunk for it")
+                # the glTF specification leaves a buffer without uri (other than a GLB's first) to
+                # extensions: valid, but its bytes are not in this file and no extension read here fills them
+                raise ReadError("unsupported_format", f"{what} has no uri and is not a GLB binary chunk, so its "
+                                                      "data are not in the file (the glTF specification leaves such "
+                                                      "buffers to extensions; the checker reads none that fills them)")
         elif isinstance(uri, str):
             data = self._buffer_uri(uri, f"buffer {i}")
         else:
@@ -158,18 +209,84 @@ class _Gltf:
                 raise _bad(f"{what}: data URI is not valid base64") from None
         return self.res.read(uri, cap, f"glTF {what}")
 
-    def view_bytes(self, i: int) -> memoryview:
-        bv = _item(_list(self.doc, "bufferViews"), i, "bufferView")
-        buf = self.buffer(_int(bv, "buffer", what=f"bufferView {i}"))
-        off = _int(bv, "byteOffset", 0, f"bufferView {i}")
-        length = _int(bv, "byteLength", what=f"bufferView {i}")
-        if off + length > len(buf):
-            raise ReadError("truncated", f"glTF bufferView {i} runs past the end of its buffer")
-        return memoryview(buf)[off : off + length]
+    def _charge(self, nbytes: int, what: str) -> None:
+        """Count ``nbytes`` of decoded data against ``Limits.max_buffer_bytes`` before making them."""
+        left = self.limits.max_buffer_bytes - self.buffer_bytes
+        if nbytes > left:
+            raise ReadError("over_check_limit", f"glTF {what} would decode to {nbytes:,} bytes, over the "
+                                                f"{left:,} bytes left of Limits.max_buffer_bytes for the file")
+        self.buffer_bytes += nbytes
 
-    def accessor(self, i: int, what: str, want: tuple[int, ...] = (1, 2, 3, 4)) -> np.ndarray:
-        """Accessor ``i`` as float64 (count, ncomp), normalized integers scaled to [0, 1] / [-1, 1]."""
-        acc = _item(_list(self.doc, "accessors"), i, "accessor")
+    def view_bytes(self, i: int) -> memoryview:
+        if i in self._view_cache:
+            return self._view_cache[i]
+        bv = _item(_list(self.doc, "bufferViews"), i, "bufferView")
+        exts = bv.get("extensions")
+        key = next((k for k in _MESHOPT if isinstance(exts, dict) and k in exts), None)
+        if key is not None:
+            view = self._meshopt_view(i, bv, key)
+        else:
+            buf = self.buffer(_int(bv, "buffer", what=f"bufferView {i}"), f"bufferView {i}")
+            off = _int(bv, "byteOffset", 0, f"bufferView {i}")
+            length = _int(bv, "byteLength", what=f"bufferView {i}")
+            if off + length > len(buf):
+                raise ReadError("truncated", f"glTF bufferView {i} runs past the end of its buffer")
+            view = memoryview(buf)[off : off + length]
+        self._view_cache[i] = view
+        return view
+
+    def _meshopt_view(self, i: int, bv: dict[str, Any], key: str) -> memoryview:
+        """BufferView ``i``'s bytes decoded from its meshopt stream (the fallback buffer is not read)."""
+        from saucerfab.check.readers import meshopt
+
+        what = f"bufferView {i} ({key})"
+        m = _dict(bv["extensions"][key], what)
+        count = _int(m, "count", what=what)
+        stride = _int(m, "byteStride", what=what)
+        mode = m.get("mode")
+        filt = m.get("filter", "NONE")
+        if not isinstance(mode, str) or not isinstance(filt, str):
+            raise _bad(f"{what}: mode / filter are not strings")
+        length = _int(bv, "byteLength", what=f"bufferView {i}")
+        if count * stride != length:
+            raise _bad(f"{what}: count {count:,} x byteStride {stride} is not the bufferView's byteLength {length:,}")
+        if "byteStride" in bv and _int(bv, "byteStride", what=f"bufferView {i}") != stride:
+            raise _bad(f"{what}: byteStride {stride} differs from the bufferView's {bv['byteStride']}")
+        try:
+            meshopt.check_params(count, stride, mode, filt)
+        except meshopt.MeshoptError as exc:
+            raise _bad(f"{what}: {exc}") from None
+        bi = _int(m, "buffer", what=what)
+        src_buf = _item(_list(self.doc, "buffers"), bi, "buffer")
+        sexts = src_buf.get("extensions")
+        if isinstance(sexts, dict) and any(isinstance(sexts.get(k), dict) and sexts[k].get("fallback") for k in _MESHOPT):
+            raise _bad(f"{what} takes its compressed data from buffer {bi}, a fallback buffer")
+        buf = self.buffer(bi, what)
+        off = _int(m, "byteOffset", 0, what)
+        clen = _int(m, "byteLength", what=what)
+        if off + clen > len(buf):
+            raise ReadError("truncated", f"glTF {what}: the compressed data run past the end of buffer {bi}")
+        if clen < meshopt.min_stream_bytes(count, stride, mode):  # a stated size the stream cannot hold
+            raise _bad(f"{what}: {clen:,} compressed bytes cannot hold {count:,} {mode} elements")
+        self._charge(count * stride, what)
+        try:
+            out = meshopt.decode(memoryview(buf)[off : off + clen], count, stride, mode, filt,
+                                 khr=key.startswith("KHR"))
+        except meshopt.MeshoptError as exc:
+            raise _bad(f"{what}: {exc}") from None
+        return memoryview(out)
+
+    def _acc(self, i: Any, what: str) -> dict[str, Any]:
+        return _item(_list(self.doc, "accessors"), i, "accessor")
+
+    def accessor(self, i: Any, what: str, want: tuple[int, ...] = (1, 2, 3, 4), *,
+                 count_must: int | None = None) -> np.ndarray:
+        """Accessor ``i`` as (count, ncomp): float64, or int64 for integers that are not normalized;
+        normalized integers scaled to [0, 1] / [-1, 1] as KHR_mesh_quantization and the core spec say.
+
+        ``count_must``: refuse (before reading) an accessor whose count differs (an attribute must
+        have one entry per position)."""
+        acc = self._acc(i, what)
         count = _int(acc, "count", what=f"accessor {i}")
         typ = acc.get("type")
         ctype = acc.get("componentType")
@@ -178,32 +295,76 @@ class _Gltf:
         ncomp = _NCOMP[typ]
         if ncomp not in want:
             raise _bad(f"accessor {i} ({what}) is {typ}, not what {what} needs")
-        if "sparse" in acc:
-            raise ReadError("unsupported_format", f"glTF accessor {i} is sparse; the checker does not read sparse accessors")
+        if count_must is not None and count != count_must:
+            raise _bad(f"accessor {i} ({what}) has {count:,} entries for {count_must:,} positions")
         if count > self.limits.max_vertices + 3 * self.limits.max_triangles:
             raise ReadError("over_check_limit", f"glTF accessor {i} has {count:,} elements, over the checker's limits")
+        normalized = acc.get("normalized", False)
+        if not isinstance(normalized, bool):
+            raise _bad(f"accessor {i}: 'normalized' is not a boolean")
+        if normalized and ctype in (5125, 5126):
+            raise _bad(f"accessor {i} is normalized but of componentType {ctype} (only 8- and 16-bit integers are)")
         dt = np.dtype("<" + _COMPONENT[ctype])
         elem = ncomp * dt.itemsize
-        if "bufferView" not in acc:
-            return np.zeros((count, ncomp))
-        bvi = _int(acc, "bufferView", what=f"accessor {i}")
-        view = self.view_bytes(bvi)
-        bv = _item(_list(self.doc, "bufferViews"), bvi, "bufferView")
-        stride = _int(bv, "byteStride", elem, f"bufferView {bvi}") or elem
-        if stride < elem:
-            raise _bad(f"bufferView {bvi} byteStride {stride} is smaller than its elements ({elem} bytes)")
-        off = _int(acc, "byteOffset", 0, f"accessor {i}")
-        if count and off + stride * (count - 1) + elem > len(view):
-            raise ReadError(
-                "truncated",
-                f"glTF accessor {i} ({count:,} x {typ}) runs past the end of bufferView {bvi} ({len(view):,} bytes)",
-            )
-        if count == 0:
-            return np.zeros((0, ncomp))
-        arr = np.ndarray((count, ncomp), dtype=dt, buffer=view, offset=off, strides=(stride, dt.itemsize))
+        if "bufferView" in acc:
+            bvi = _int(acc, "bufferView", what=f"accessor {i}")
+            view = self.view_bytes(bvi)
+            bv = _item(_list(self.doc, "bufferViews"), bvi, "bufferView")
+            stride = _int(bv, "byteStride", elem, f"bufferView {bvi}") or elem
+            if stride < elem:
+                raise _bad(f"bufferView {bvi} byteStride {stride} is smaller than its elements ({elem} bytes)")
+            off = _int(acc, "byteOffset", 0, f"accessor {i}")
+            if count and off + stride * (count - 1) + elem > len(view):
+                raise ReadError(
+                    "truncated",
+                    f"glTF accessor {i} ({count:,} x {typ}) runs past the end of bufferView {bvi} ({len(view):,} bytes)",
+                )
+            if count:
+                arr = np.ndarray((count, ncomp), dtype=dt, buffer=view, offset=off, strides=(stride, dt.itemsize))
+            else:
+                arr = np.zeros((0, ncomp), dtype=dt)
+        else:
+            arr = np.zeros((count, ncomp), dtype=dt)  # no bufferView: zeros (unless sparse says otherwise)
+        if "sparse" in acc:
+            arr = self._sparse(i, acc, arr, dt, ncomp, count)
         out = arr.astype(np.float64) if dt.kind == "f" else arr.astype(np.int64)
-        if acc.get("normalized") and dt.kind != "f":
+        if normalized:
             out = np.maximum(out / _NORM[_COMPONENT[ctype]], -1.0)
+        return out
+
+    def _sparse(self, i: int, acc: dict[str, Any], base: np.ndarray, dt: np.dtype, ncomp: int,
+                count: int) -> np.ndarray:
+        """``base`` with accessor ``i``'s sparse substitutions, bounded and range-checked."""
+        what = f"accessor {i} sparse"
+        sp = _dict(acc["sparse"], what)
+        n = _int(sp, "count", what=what)
+        if not 1 <= n <= count:
+            raise _bad(f"{what}: count {n:,} is not between 1 and the accessor's count {count:,}")
+        ind = _dict(sp.get("indices"), f"{what} indices")
+        val = _dict(sp.get("values"), f"{what} values")
+        ict = ind.get("componentType")
+        if ict not in _INDEX_TYPES:
+            raise _bad(f"{what}: indices componentType {ict!r} is not an unsigned integer type")
+        idt = np.dtype("<" + _COMPONENT[ict])
+
+        def packed(d: dict[str, Any], dtype: np.dtype, k: int, part: str) -> np.ndarray:
+            bvi = _int(d, "bufferView", what=f"{what} {part}")
+            view = self.view_bytes(bvi)
+            off = _int(d, "byteOffset", 0, f"{what} {part}")
+            if off + k * dtype.itemsize > len(view):
+                raise ReadError("truncated", f"glTF {what} {part} ({k:,} x {dtype.itemsize} bytes) run past the "
+                                             f"end of bufferView {bvi} ({len(view):,} bytes)")
+            return np.frombuffer(view, dtype=dtype, count=k, offset=off)
+
+        idx = packed(ind, idt, n, "indices").astype(np.int64)
+        if n > 1 and not (np.diff(idx) > 0).all():
+            raise _bad(f"{what}: indices are not strictly increasing")
+        if idx[-1] >= count:
+            raise ReadError("index_out_of_range", f"glTF {what}: index {int(idx[-1]):,} but the accessor has "
+                                                  f"{count:,} elements")
+        vals = packed(val, dt, n * ncomp, "values").reshape(n, ncomp)
+        out = np.array(base, dtype=dt)  # a copy: never write into the file's buffer
+        out[idx] = vals
         return out
 
     # ---- scene
@@ -219,11 +380,15 @@ class _Gltf:
                 raise _bad("a scene lists a node that is not an index")
             self._check_cost(nodes, roots)
             for r in roots:
-                self._node(nodes, r, np.eye(4), 0, set())
+                self._node(nodes, r, _IDENTITY, 0, set())
         else:
             self.b.note("ignored_content", "glTF without scenes: every mesh was read once, untransformed")
             for mi in range(len(meshes)):
-                self._mesh(meshes, mi, np.eye(4))
+                self._instance(mi, _IDENTITY)
+        self._flush()
+        if self.b.nf == 0 and self.skipped:  # say what was skipped: that is why there is nothing to check
+            more = f"; and {len(self.skipped) - 3} more" if len(self.skipped) > 3 else ""
+            raise ReadError("no_triangles", f"the file holds no triangles ({'; '.join(self.skipped[:3])}{more})")
         return self.b.build(unit_mm=1000.0, units="meter", units_stated=True)
 
     def _check_cost(self, nodes: list[Any], roots: list[int]) -> None:
@@ -302,7 +467,7 @@ class _Gltf:
                 continue
             attrs = _dict(prim.get("attributes", {}), f"mesh {mi} primitive {pi} attributes")
             if "POSITION" not in attrs:
-                raise _bad(f"mesh {mi} primitive {pi} has no POSITION")
+                continue  # skipped when decoded (valid glTF: nothing to draw)
             nv = _int(_item(accessors, _int(attrs, "POSITION", what=what), "accessor"), "count", what=what)
             n_idx = nv
             if "indices" in prim:
@@ -322,28 +487,80 @@ class _Gltf:
         if i in path:
             raise _bad(f"node {i} is its own ancestor (a cycle)")
         n = _item(nodes, i, "node")
-        M = parent @ _node_matrix(n, i)
+        local = _node_matrix(n, i)
+        M = parent if local is None else parent @ local
         if "mesh" in n:
-            self._mesh(_list(self.doc, "meshes"), _int(n, "mesh", what=f"node {i}"), M)
-        for child in _list(n, "children"):
-            c = _whole(child)
-            if c is None:
-                raise _bad(f"node {i} has a child that is not an index")
-            self._node(nodes, c, M, depth + 1, path | {i})
+            self._instance(_int(n, "mesh", what=f"node {i}"), M)
+        children = _list(n, "children")
+        if children:
+            path.add(i)
+            for child in children:
+                c = _whole(child)
+                if c is None:
+                    raise _bad(f"node {i} has a child that is not an index")
+                self._node(nodes, c, M, depth + 1, path)
+            path.discard(i)
 
-    def _mesh(self, meshes: list[Any], mi: int, M: np.ndarray) -> None:
-        """One instance of mesh ``mi`` under transform ``M`` (its primitives decoded on first use)."""
-        prims = self._prims.get(mi)
-        if prims is None:
-            prims = self._decode_mesh(meshes, mi)
-            self._prims[mi] = prims
-        mirrored = np.linalg.det(M[:3, :3]) < 0
-        for pr in prims:
-            self.b.reserve(len(pr.V), len(pr.F), pr.what)
-            Vw = pr.V @ M[:3, :3].T + M[:3, 3]
-            F = pr.F[:, ::-1] if mirrored else pr.F  # mirrored instance: keep outward winding
-            uv = pr.uv[:, ::-1] if (mirrored and pr.uv is not None) else pr.uv
-            self.b.add(Vw, F, corner_uv=uv, face_texture=pr.tex, face_colour=pr.col, what=pr.what)
+    def _instance(self, mi: int, M: np.ndarray) -> None:
+        """Queue one instance of mesh ``mi`` under transform ``M``; a run of one mesh's instances is added at once.
+
+        Scenes that instance a part thousands of times (a tray of cups, a
+        lattice) would otherwise pay numpy's per-call cost per instance; the
+        queue keeps the file's order, so face indices are as if added one by one.
+        """
+        if self._queue and self._queue_mesh != mi:
+            self._flush()
+        if mi not in self._prims:
+            self._prims[mi] = self._merged(self._decode_mesh(_list(self.doc, "meshes"), mi))
+        self._queue_mesh = mi
+        self._queue.append(M)
+        merged = self._prims[mi]
+        if merged is not None:  # the caps, as each instance comes (the walk was priced already; this is the guard)
+            self.b.reserve(len(merged[0].V) * len(self._queue), len(merged[0].F) * len(self._queue), merged[0].what,
+                           parts=merged[1] * len(self._queue))
+
+    def _flush(self) -> None:
+        """Add the queued instances of one mesh: every instance's vertices transformed in one product."""
+        if not self._queue:
+            return
+        merged = self._prims[self._queue_mesh]
+        Ms = np.stack(self._queue)
+        self._queue = []
+        if merged is None:
+            return
+        pr, parts = merged
+        k, nv = len(Ms), len(pr.V)
+        Vw = (np.einsum("kij,nj->kni", Ms[:, :3, :3], pr.V) + Ms[:, None, :3, 3]).reshape(-1, 3)
+        F = np.broadcast_to(pr.F, (k, *pr.F.shape)) + (np.arange(k, dtype=np.int64) * nv)[:, None, None]
+        mirrored = np.linalg.det(Ms[:, :3, :3]) < 0
+        uv = None if pr.uv is None else np.broadcast_to(pr.uv, (k, *pr.uv.shape)).copy()
+        if mirrored.any():  # a mirrored instance keeps its outward winding: each face's corners reversed
+            F = F.copy()
+            F[mirrored] = F[mirrored][:, :, ::-1]
+            if uv is not None:
+                uv[mirrored] = uv[mirrored][:, :, ::-1]
+        tile = (lambda a: None if a is None else np.tile(a, k))  # noqa: E731
+        self.b.add(Vw, F.reshape(-1, 3), corner_uv=None if uv is None else uv.reshape(-1, 3, 2),
+                   face_texture=tile(pr.tex), face_colour=tile(pr.col), what=pr.what, parts=parts * k)
+
+    @staticmethod
+    def _merged(prims: list[_Prim]) -> tuple[_Prim, int] | None:
+        """A mesh's primitives as one (vertices and faces in order, absent UVs/colours filled), and their count."""
+        if not prims:
+            return None
+        if len(prims) == 1:
+            return prims[0], 1
+        offs = np.cumsum([0] + [len(p.V) for p in prims[:-1]])
+        has = lambda name: any(getattr(p, name) is not None for p in prims)  # noqa: E731
+        uv = np.concatenate([p.uv if p.uv is not None else np.full((len(p.F), 3, 2), np.nan) for p in prims]) \
+            if has("uv") else None
+        tex = np.concatenate([p.tex if p.tex is not None else np.full(len(p.F), -1, np.int32) for p in prims]) \
+            if has("tex") else None
+        col = np.concatenate([p.col if p.col is not None else np.zeros(len(p.F), bool) for p in prims]) \
+            if has("col") else None
+        one = _Prim(what=prims[0].what, V=np.concatenate([p.V for p in prims]),
+                    F=np.concatenate([p.F + o for p, o in zip(prims, offs)]), uv=uv, tex=tex, col=col)
+        return one, len(prims)
 
     def _decode_mesh(self, meshes: list[Any], mi: int) -> list[_Prim]:
         """The triangle primitives of mesh ``mi``, read and range-checked, in the mesh's own coordinates."""
@@ -353,26 +570,50 @@ class _Gltf:
             prim = _dict(prim, f"mesh {mi} primitive {pi}")
             mode = _int(prim, "mode", 4, f"mesh {mi} primitive {pi}")
             if mode not in (4, 5, 6):
-                self.b.note("ignored_content", "glTF points and lines primitives were ignored")
+                self._skip(f"glTF mesh {mi} primitive {pi} is points or lines (mode {mode}) and was ignored",
+                           "glTF points and lines primitives were ignored")
                 continue
             attrs = _dict(prim.get("attributes", {}), f"mesh {mi} primitive {pi} attributes")
-            if "POSITION" not in attrs:
-                raise _bad(f"mesh {mi} primitive {pi} has no POSITION")
             what = f"glTF mesh {mi} primitive {pi}"
-            pos_acc = _item(_list(self.doc, "accessors"), _int(attrs, "POSITION", what=what), "accessor")
+            if "POSITION" not in attrs:
+                self._skip(f"{what} has no POSITION attribute and was ignored")
+                continue
+            pos_acc = self._acc(_int(attrs, "POSITION", what=what), what)
             nv = _int(pos_acc, "count", what=what)
             n_idx = nv
             if "indices" in prim:
-                n_idx = _int(_item(_list(self.doc, "accessors"), _int(prim, "indices", what=what), "accessor"), "count", what=what)
+                n_idx = _int(self._acc(_int(prim, "indices", what=what), what), "count", what=what)
             self.b.reserve(nv, n_idx // 3 if mode == 4 else max(0, n_idx - 2), what)
-            V = self.accessor(attrs["POSITION"], "POSITION", (3,))
-            if "indices" in prim:
-                idx = self.accessor(prim["indices"], "indices", (1,)).ravel()
-                if idx.dtype.kind == "f":
-                    raise _bad(f"{what}: indices are floats")
+            exts = prim.get("extensions")
+            draco = exts.get(_DRACO) if isinstance(exts, dict) else None
+            if draco is not None:
+                F, dattrs = self._draco(_dict(draco, f"{what} {_DRACO}"), attrs, prim, mode, nv, n_idx, what)
             else:
-                idx = np.arange(len(V), dtype=np.int64)
-            F = _triangles(idx, mode, what)
+                dattrs = {}
+                F = None
+
+            def attr(name: str, want: tuple[int, ...], count: int | None, dattrs: dict[str, np.ndarray] = dattrs,
+                     attrs: dict[str, Any] = attrs) -> np.ndarray:
+                """An attribute: decoded from the Draco stream when it carries it, else its accessor."""
+                if name in dattrs:
+                    return dattrs[name]
+                return self.accessor(attrs[name], name, want, count_must=count)
+
+            V = attr("POSITION", (3,), None)
+            if F is None:
+                if "indices" in prim:
+                    ia = self._acc(prim["indices"], "indices")
+                    if ia.get("componentType") not in _INDEX_TYPES:
+                        raise _bad(f"{what}: the indices accessor's componentType {ia.get('componentType')!r} is not "
+                                   "an unsigned integer type")
+                    idx = self.accessor(prim["indices"], "indices", (1,)).ravel()
+                else:
+                    idx = np.arange(len(V), dtype=np.int64)
+                if mode == 4 and len(idx) % 3:
+                    self.b.note("ignored_content", f"{what}: {len(idx) % 3} trailing indices that make no whole "
+                                                   "triangle were ignored")
+                    idx = idx[: len(idx) - len(idx) % 3]
+                F = _triangles(idx, mode, what)
             if F.size and (F.min() < 0 or F.max() >= len(V)):
                 bad = int(F.max()) if F.max() >= len(V) else int(F.min())
                 raise ReadError("index_out_of_range",
@@ -385,19 +626,25 @@ class _Gltf:
             bct = pbr.get("baseColorTexture")
             if bct is not None:
                 bct = _dict(bct, "baseColorTexture")
-                tc = f"TEXCOORD_{_int(bct, 'texCoord', 0, 'baseColorTexture')}"
+                tt = _texture_transform(bct)
+                tcn = _int(bct, "texCoord", 0, "baseColorTexture")
+                if tt is not None and tt[3] is not None:
+                    tcn = tt[3]
+                tc = f"TEXCOORD_{tcn}"
                 ti = self._texture(_int(bct, "index", what="baseColorTexture"))
                 if tc in attrs:
-                    UV = self.accessor(attrs[tc], tc, (2,))
+                    UV = attr(tc, (2,), len(V))
                     if len(UV) != len(V):
                         raise _bad(f"{what}: {tc} has {len(UV)} entries for {len(V)} positions")
+                    if tt is not None:
+                        UV = _apply_texture_transform(UV, tt)
                     uv = UV[F] if len(F) else np.zeros((0, 3, 2))
                     tex = np.full(len(F), ti, dtype=np.int32)
                     self.b.colour_kinds.add("texture")
                 else:
                     self.b.note("ignored_content", f"{what} has a base colour texture but no {tc}")
             if "COLOR_0" in attrs:
-                C = self.accessor(attrs["COLOR_0"], "COLOR_0", (3, 4))
+                C = attr("COLOR_0", (3, 4), len(V))
                 if len(C) != len(V):
                     raise _bad(f"{what}: COLOR_0 has {len(C)} entries for {len(V)} positions")
                 col = np.ones(len(F), dtype=bool)
@@ -407,6 +654,62 @@ class _Gltf:
                 self.b.colour_kinds.add("material")
             out.append(_Prim(what, V, F, uv, tex, col))
         return out
+
+    def _draco(self, ext: dict[str, Any], attrs: dict[str, Any], prim: dict[str, Any], mode: int, nv: int,
+               n_idx: int, what: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """(faces, {attribute: values}) of a Draco-compressed primitive, bounded before decoding."""
+        from saucerfab.check.readers import draco
+
+        what = f"{what} ({_DRACO})"
+        if mode not in (4, 5):
+            raise _bad(f"{what}: mode {mode}; Draco primitives are triangles or triangle strips")
+        ids = _dict(ext.get("attributes", {}), f"{what} attributes")
+        if "POSITION" not in ids:
+            raise _bad(f"{what}: the extension's attributes name no POSITION")
+        for name in ids:
+            if name not in attrs:
+                raise _bad(f"{what}: attribute {name} is in the extension but not in the primitive")
+        data = bytes(self.view_bytes(_int(ext, "bufferView", what=what)))
+        # the faces the accessors promise (their counts were priced against the caps)
+        want_faces = n_idx // 3 if mode == 4 else max(0, n_idx - 2)
+        try:
+            counts = draco.stream_counts(data, self.limits.max_nesting)
+        except draco.DracoError as exc:
+            raise ReadError(exc.code, f"glTF: {what}: {exc}") from None
+        if counts.faces > want_faces or counts.vertices > nv:
+            raise _bad(f"{what}: the Draco stream states {counts.faces:,} faces and {counts.vertices:,} vertices, "
+                       f"more than its accessors declare ({want_faces:,} faces, {nv:,} positions)")
+        try:
+            F, by_id = draco.decode(data)
+        except draco.DracoError as exc:
+            raise ReadError(exc.code, f"glTF: {what}: {exc}") from None
+        pos_id = _whole(ids["POSITION"])
+        if pos_id not in by_id:
+            raise _bad(f"{what}: the Draco stream has no attribute with id {ids['POSITION']!r} (for POSITION)")
+        npts = len(by_id[pos_id])
+        if len(F) > want_faces or npts > nv:
+            raise _bad(f"{what}: the Draco stream decodes to {len(F):,} faces and {npts:,} points, more than its "
+                       f"accessors declare ({want_faces:,} faces, {nv:,} positions)")
+        out: dict[str, np.ndarray] = {}
+        for name, uid in ids.items():
+            u = _whole(uid)
+            if u is None:
+                raise _bad(f"{what}: attribute {name}'s id {uid!r} is not an integer")
+            if u not in by_id:
+                raise _bad(f"{what}: the Draco stream has no attribute with id {u} (for {name})")
+            arr = by_id[u]
+            acc = self._acc(attrs[name], name)
+            typ = acc.get("type")
+            if typ not in _NCOMP or arr.shape[1] != _NCOMP[typ] or len(arr) != npts:
+                raise _bad(f"{what}: Draco attribute {u} ({name}) is {len(arr):,} x {arr.shape[1]}, not "
+                           f"{npts:,} x {typ}")
+            if arr.dtype.kind == "f":
+                out[name] = arr.astype(np.float64)
+            else:
+                vals = arr.astype(np.int64)
+                ct = _COMPONENT.get(acc.get("componentType"), "")
+                out[name] = np.maximum(vals / _NORM[ct], -1.0) if acc.get("normalized") and ct in _NORM else vals
+        return F, out
 
     def _texture(self, ti: int) -> int:
         tex = _item(_list(self.doc, "textures"), ti, "texture")
@@ -440,8 +743,26 @@ class _Gltf:
         return self.b.texture(f"image {si}", load)
 
 
-def _node_matrix(n: dict[str, Any], i: int) -> np.ndarray:
+_IDENTITY = np.eye(4)
+_TRS_KEYS = ("matrix", "translation", "rotation", "scale")
+
+
+def _node_matrix(n: dict[str, Any], i: int) -> np.ndarray | None:
+    """Node ``i``'s local transform (4, 4), or None for none (the common case, kept cheap)."""
+    if not any(k in n for k in _TRS_KEYS):
+        return None
     try:
+        if "translation" in n and not any(k in n for k in ("matrix", "rotation", "scale")):
+            # translation only (instanced parts are placed so): plain floats, no numpy per number
+            t = n["translation"]
+            if not isinstance(t, list) or len(t) != 3:
+                raise _bad(f"node {i} translation/rotation/scale have the wrong lengths")
+            tx, ty, tz = (float(x) for x in t)
+            if not (math.isfinite(tx) and math.isfinite(ty) and math.isfinite(tz)):
+                raise _bad(f"node {i} transform has NaN or infinite entries")
+            M = _IDENTITY.copy()
+            M[0, 3], M[1, 3], M[2, 3] = tx, ty, tz
+            return M
         if "matrix" in n:
             m = np.array(n["matrix"], dtype=np.float64)
             if m.shape != (16,):
@@ -467,6 +788,35 @@ def _node_matrix(n: dict[str, Any], i: int) -> np.ndarray:
     if not np.isfinite(M).all():
         raise _bad(f"node {i} transform has NaN or infinite entries")
     return M
+
+
+def _texture_transform(info: dict[str, Any]) -> tuple[np.ndarray, float, np.ndarray, int | None] | None:
+    """(offset, rotation, scale, texCoord or None) of a textureInfo's ``KHR_texture_transform``, or None."""
+    exts = info.get("extensions")
+    if not isinstance(exts, dict) or "KHR_texture_transform" not in exts:
+        return None
+    t = _dict(exts["KHR_texture_transform"], "KHR_texture_transform")
+    try:
+        off = np.array(t.get("offset", [0.0, 0.0]), dtype=np.float64)
+        rot = float(t.get("rotation", 0.0))
+        scale = np.array(t.get("scale", [1.0, 1.0]), dtype=np.float64)
+    except (TypeError, ValueError):
+        raise _bad("KHR_texture_transform offset/rotation/scale are not numbers") from None
+    if off.shape != (2,) or scale.shape != (2,) or not (np.isfinite(off).all() and np.isfinite(scale).all()
+                                                        and np.isfinite(rot)):
+        raise _bad("KHR_texture_transform offset and scale must be two finite numbers, rotation one")
+    tc = _int(t, "texCoord", what="KHR_texture_transform") if "texCoord" in t else None
+    return off, rot, scale, tc
+
+
+def _apply_texture_transform(uv: np.ndarray, tt: tuple[np.ndarray, float, np.ndarray, int | None]) -> np.ndarray:
+    """UVs through ``translation * rotation * scale``. The rotation turns the UVs counter-clockwise in glTF's
+    v-down UV space, as the extension's example and its implementations (Babylon.js, Blender, three.js,
+    KhronosGroup/glTF#1563) have it: u' = cos*u + sin*v, v' = -sin*u + cos*v."""
+    off, rot, scale, _ = tt
+    c, s = np.cos(rot), np.sin(rot)
+    su, sv = uv[:, 0] * scale[0], uv[:, 1] * scale[1]
+    return np.stack([c * su + s * sv + off[0], -s * su + c * sv + off[1]], axis=1)
 
 
 def _triangles(idx: np.ndarray, mode: int, what: str) -> np.ndarray:
@@ -545,10 +895,13 @@ def _load_json(raw: bytes, limits: Limits) -> Any:
     if not isinstance(asset, dict) or not str(asset.get("version", "")).startswith("2"):
         raise ReadError("unsupported_format", "not a glTF 2.0 document (asset.version is not 2.x)")
     required = doc.get("extensionsRequired", [])
-    if required:
-        # Draco / meshopt compression and the like change what accessors mean; reading them as plain
-        # data would report nonsense, so say plainly that the file needs what the checker lacks
-        names = ", ".join(str(x)[:60] for x in required[:5]) if isinstance(required, list) else "?"
+    if not isinstance(required, list):
+        raise _bad("'extensionsRequired' is not a list")
+    missing = [x for x in required if not (isinstance(x, str) and x in SUPPORTED_EXTENSIONS)]
+    if missing:
+        # other extensions may change what accessors or nodes mean; reading them as plain data would
+        # report nonsense, so say plainly that the file needs what the checker lacks
+        names = ", ".join(str(x)[:60] for x in missing[:5])
         raise ReadError("unsupported_format", f"the glTF requires extensions the checker does not read ({names}); "
                                               "export it without them")
     return doc

@@ -39,6 +39,9 @@ _FACE_FORMS = {
     "v//n": rb"-?[0-9]+//-?[0-9]+",
 }
 MAX_MTL_BYTES = 16 << 20
+FAST_OBJ_BYTES = 8 << 20
+"""OBJ files this large (after joining continued lines) try the numba parser, :mod:`.obj_fast`, first: below
+about 8 MB the 1.5 s of importing numba and loading its kernels in a fresh process outweighs the gain."""
 
 
 @dataclass
@@ -131,6 +134,69 @@ def read_obj(path: Path, data: bytes, limits: Limits, res: Resources | None = No
         # Rhino writes long faces so): join the lines first, so every count and parse sees one statement
         data = data.replace(b"\\\r\n", b" ").replace(b"\\\n", b" ")
         b.note("continued_lines", "OBJ statements continued with a trailing backslash were joined")
+    parsed = None
+    if len(data) >= FAST_OBJ_BYTES:  # the numba parser (obj_fast); None where it leaves the file to _parse
+        from saucerfab.check.readers.obj_fast import parse as parse_fast
+
+        parsed = parse_fast(data, limits)
+    mtllibs = None
+    if parsed is None:
+        V, vcol, UV, mat_names, fv, ft, fmat, n_no_uv = _parse(data, limits, b)
+    else:
+        V, has_vcol, UV, mat_names, fv, ft, fmat, n_no_uv, nf, other, mtllibs = parsed
+        b.reserve(len(V), nf, "the OBJ")
+        if other:
+            b.note("ignored_content", "OBJ points, lines and free-form curves/surfaces were ignored")
+        vcol = V if has_vcol else None
+    b.reserve(len(V), len(fv), "the OBJ")
+    if len(fv) == 0:
+        raise ReadError("no_triangles", "the OBJ's faces have fewer than 3 corners")
+    if n_no_uv > 0:
+        b.note("texcoords_missing",
+               f"{n_no_uv:,} triangles name texture coordinates the file does not have (it has {len(UV):,} 'vt' "
+               "lines); they are read without texture placement and print uncoloured: re-export with UVs")
+
+    # materials and textures
+    mats, failed = _read_mtls(data, res, mtllibs)
+    for ref, exc in failed:
+        # without its material library an OBJ prints uncoloured: as serious as a missing texture
+        status = "unsafe_path" if exc.code == "archive_unsafe_path" else "missing"
+        b.texture(f"<mtllib {ref}>", lambda: TextureInfo(name=f"{ref} (material library)", status=status,
+                                                         message=f"material library {ref!r}: {exc.message}"))
+    m = len(fv)
+    corner_uv = None
+    face_tex = None
+    face_col = np.zeros(m, dtype=bool)
+    if vcol is not None:
+        face_col[:] = True
+        b.colour_kinds.add("vertex")
+    for mi, name in enumerate(mat_names):
+        mat = mats.get(name.decode("utf-8", "replace"))
+        if mat is None:
+            continue
+        sel = fmat == mi
+        if mat.map_kd is not None:
+            has_uv = sel & (ft >= 0).all(axis=1)
+            if has_uv.any():
+                if corner_uv is None:
+                    corner_uv = np.full((m, 3, 2), np.nan)
+                    face_tex = np.full(m, -1, dtype=np.int32)
+                ref = mat.map_kd
+                ti = b.texture(ref, lambda: res.texture(ref))
+                corner_uv[has_uv] = UV[ft[has_uv]]
+                face_tex[has_uv] = ti  # type: ignore[index]
+                b.colour_kinds.add("texture")
+        elif mat.kd:
+            face_col[sel] = True
+            b.colour_kinds.add("material")
+    b.add(V[:, :3], fv, corner_uv=corner_uv, face_texture=face_tex,
+          face_colour=face_col if face_col.any() else None, what="OBJ")
+    return b.build(units="millimeter (assumed; OBJ has no units)")
+
+
+def _parse(data: bytes, limits: Limits, b: MeshBuilder
+           ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, list[bytes], np.ndarray, np.ndarray, np.ndarray, int]:
+    """The reference parse: (V, vertex colours or None, UV, material names, fv, ft, fmat, triangles missing UVs)."""
     counts = _count_statements(data, {b"v": limits.max_vertices, b"vt": limits.max_vertices, b"f": limits.max_triangles})
     nv, nvt, nf = counts[b"v"], counts[b"vt"], counts[b"f"]
     b.reserve(nv, nf, "the OBJ")
@@ -169,53 +235,14 @@ def read_obj(path: Path, data: bytes, limits: Limits, res: Resources | None = No
             face_mat.append(cur)
     if not face_pay:
         raise ReadError("no_triangles", f"the OBJ has {len(V):,} vertices but no faces")
-    fv, ft, fmat = _faces(face_pay, np.array(face_mat, dtype=np.int64), len(V), len(UV), data, limits)
-    b.reserve(len(V), len(fv), "the OBJ")
-    if len(fv) == 0:
-        raise ReadError("no_triangles", "the OBJ's faces have fewer than 3 corners")
-
-    # materials and textures
-    mats, failed = _read_mtls(data, res)
-    for ref, exc in failed:
-        # without its material library an OBJ prints uncoloured: as serious as a missing texture
-        status = "unsafe_path" if exc.code == "archive_unsafe_path" else "missing"
-        b.texture(f"<mtllib {ref}>", lambda: TextureInfo(name=f"{ref} (material library)", status=status,
-                                                         message=f"material library {ref!r}: {exc.message}"))
-    m = len(fv)
-    corner_uv = None
-    face_tex = None
-    face_col = np.zeros(m, dtype=bool)
-    if vcol is not None:
-        face_col[:] = True
-        b.colour_kinds.add("vertex")
-    for mi, name in enumerate(mat_names):
-        mat = mats.get(name.decode("utf-8", "replace"))
-        if mat is None:
-            continue
-        sel = fmat == mi
-        if mat.map_kd is not None:
-            has_uv = sel & (ft >= 0).all(axis=1)
-            if has_uv.any():
-                if corner_uv is None:
-                    corner_uv = np.full((m, 3, 2), np.nan)
-                    face_tex = np.full(m, -1, dtype=np.int32)
-                ref = mat.map_kd
-                ti = b.texture(ref, lambda: res.texture(ref))
-                corner_uv[has_uv] = UV[ft[has_uv]]
-                face_tex[has_uv] = ti  # type: ignore[index]
-                b.colour_kinds.add("texture")
-        elif mat.kd:
-            face_col[sel] = True
-            b.colour_kinds.add("material")
-    b.add(V[:, :3], fv, corner_uv=corner_uv, face_texture=face_tex,
-          face_colour=face_col if face_col.any() else None, what="OBJ")
-    return b.build(units="millimeter (assumed; OBJ has no units)")
+    fv, ft, fmat, n_no_uv = _faces(face_pay, np.array(face_mat, dtype=np.int64), len(V), len(UV), data, limits)
+    return V, vcol, UV, mat_names, fv, ft, fmat, n_no_uv
 
 
 def _faces(
     pay: list[bytes], mat: np.ndarray, nv: int, nvt: int, data: bytes, limits: Limits
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(triangles (m,3) vertex indices, (m,3) uv indices or -1, (m,) material) from 'f' payloads.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(triangles (m,3) vertex indices, (m,3) uv indices or -1, (m,) material, triangles whose UVs are missing).
 
     Bulk path: every face has the first face's corner count k (triangles,
     quads...) and index form, and no index is negative; then k-gons are
@@ -248,9 +275,25 @@ def _faces(
                 ft = np.full(fv.shape, -1, dtype=np.int64)
             _check_range(fv, nv, "vertex")
             if form in ("v/t", "v/t/n"):
-                _check_range(ft, nvt, "texture coordinate")
-            return fv, ft, np.repeat(mat, k - 2)
+                _check_range(ft, 1 << 62, "texture coordinate")  # only an index of 0 (-1 here): no OBJ index
+            ft, dropped = _drop_missing_uv(ft, nvt)
+            return fv, ft, np.repeat(mat, k - 2), dropped
     return _faces_slow(data, nv, nvt, limits)
+
+
+def _drop_missing_uv(ft: np.ndarray, nvt: int) -> tuple[np.ndarray, int]:
+    """``ft`` (m, 3) with the rows naming a texture coordinate the file lacks set to -1 (no UVs), and their count.
+
+    Some exporters write ``f 1/1 2/2 3/3`` with no (or too few) ``vt``
+    lines. The geometry is whole; only those faces' texture placement is
+    missing, which the colour checks report (the faces print uncoloured), so
+    it is not a reason to refuse the file.
+    """
+    bad = ((ft < 0) | (ft >= nvt)).any(axis=1) & (ft != -1).any(axis=1)
+    if bad.any():
+        ft = ft.copy()
+        ft[bad] = -1
+    return ft, int(bad.sum())
 
 
 def _check_range(idx: np.ndarray, n: int, what: str) -> None:
@@ -288,7 +331,7 @@ def _corner_index(text: bytes, seen: int, total: int, nface: int, what: str) -> 
 
 
 def _faces_slow(data: bytes, nv_total: int, nvt_total: int, limits: Limits
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Sequential parse: mixed polygons, negative (relative) indices, comments, mixed forms.
 
     Fan triangulation can turn one long line into many triangles, so the
@@ -323,7 +366,11 @@ def _faces_slow(data: bytes, nv_total: int, nvt_total: int, limits: Limits
                 parts = c.split(b"/")
                 vi.append(_corner_index(parts[0], nv, nv_total, nface, "vertex"))
                 if len(parts) > 1 and parts[1]:
-                    ti.append(_corner_index(parts[1], nvt, nvt_total, nface, "texture coordinate"))
+                    t = int(parts[1])  # a texture coordinate the file lacks is dropped below, not refused
+                    if t == 0:  # but 0 is no OBJ index at all
+                        _corner_index(parts[1], nvt, nvt_total, nface, "texture coordinate")
+                    j = t - 1 if t > 0 else nvt + t
+                    ti.append(j if 0 <= j < nvt_total else nvt_total)  # nvt_total: "missing", and fits int64
                 else:
                     ti.append(-1)
         except ValueError:
@@ -339,18 +386,17 @@ def _faces_slow(data: bytes, nv_total: int, nvt_total: int, limits: Limits
     fva = np.array(fv, dtype=np.int64).reshape(-1, 3)
     fta = np.array(ft, dtype=np.int64).reshape(-1, 3)
     _check_range(fva, nv_total, "vertex")
-    has_t = (fta != -1).all(axis=1)
-    if has_t.any():
-        _check_range(fta[has_t], nvt_total, "texture coordinate")
-    fta[~has_t] = -1
-    return fva, fta, np.array(fmat, dtype=np.int64)
+    fta, dropped = _drop_missing_uv(fta, nvt_total)
+    fta[~(fta != -1).all(axis=1)] = -1
+    return fva, fta, np.array(fmat, dtype=np.int64), dropped
 
 
-def _read_mtls(data: bytes, res: Resources) -> tuple[dict[str, _Material], list[tuple[str, ReadError]]]:
-    """Materials from every ``mtllib`` (read only from beside the OBJ), and the libraries that failed."""
+def _read_mtls(data: bytes, res: Resources, refs: list[bytes] | None = None
+               ) -> tuple[dict[str, _Material], list[tuple[str, ReadError]]]:
+    """Materials from every ``mtllib`` (``refs``: their payloads, if known; read only from beside the OBJ), and the libraries that failed."""
     mats: dict[str, _Material] = {}
     failed: list[tuple[str, ReadError]] = []
-    for raw in _MTLLIB.findall(data)[:16]:
+    for raw in (_MTLLIB.findall(data) if refs is None else refs)[:16]:
         ref = raw.decode("utf-8", "replace").strip()
         try:
             text = res.read(ref, MAX_MTL_BYTES, "material library").decode("utf-8", "replace")

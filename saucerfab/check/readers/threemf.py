@@ -20,7 +20,22 @@ everything an archive can claim and must see the colour data:
   arrays are made (a small mesh instanced a million times is refused);
 * triangle properties (``pid``, ``p1``-``p3``, object ``pid``/``pindex``)
   resolve to texture coordinates, colours or base materials, every index
-  range-checked.
+  range-checked;
+* the package is judged against the 3MF core and Materials specifications
+  as it is read (:mod:`saucerfab.check.readers.threemf_rules`): OPC
+  relationships and content types decide the start part, each model part's
+  nesting depth is scanned before it is parsed, and every broken MUST is a
+  ``spec_violation`` finding (an error) rather than a refusal, so the mesh
+  is still checked. A resource id defined twice keeps its first definition
+  (faces naming a duplicated property group read uncoloured). Refused as
+  ``unsupported_format``: a model that requires an extension the checker
+  does not read, and a part encrypted with the Secure Content extension
+  (``%3McF`` cipher data, or an ``encryptedfile`` relationship), which used
+  to be called "not well-formed XML".
+
+A 3MF read here is then also read by lib3mf, the 3MF Consortium's own
+reader, in a bounded child process (:mod:`saucerfab.check.readers.lib3mf_strict`,
+run by :func:`saucerfab.check.check_mesh`).
 """
 
 from __future__ import annotations
@@ -35,12 +50,17 @@ import numpy as np
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
 from saucerfab.check.readers.safe import SafeZip, TextureBudget, parse_xml, probe_texture, zip_join
-
-NS_CORE = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
-NS_MAT = "http://schemas.microsoft.com/3dmanufacturing/material/2015/02"
-NS_PROD = "http://schemas.microsoft.com/3dmanufacturing/production/2015/06"
-NS_RELS = "http://schemas.openxmlformats.org/package/2006/relationships"
-REL_MODEL = "http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"
+from saucerfab.check.readers.threemf_rules import (
+    CIPHER_MAGIC,
+    MAX_XML_DEPTH,
+    NS_CORE,
+    NS_MAT,
+    NS_PROD,
+    Rules,
+    declared_encoding,
+    root_namespaces,
+    xml_too_deep,
+)
 
 #: millimetres per 3MF unit
 UNITS_MM = {"micron": 0.001, "millimeter": 1.0, "centimeter": 10.0, "inch": 25.4, "foot": 304.8, "meter": 1000.0}
@@ -287,6 +307,9 @@ def _parse_block(kind: str, content: bytes, prefix: bytes) -> Any:
 
 # -- model structure ------------------------------------------------------------
 
+_GROUP_TAGS = frozenset({_M + "texture2dgroup", _M + "colorgroup", _C + "basematerials", _M + "compositematerials",
+                         _M + "multiproperties"})
+
 
 @dataclass
 class _Group:
@@ -305,6 +328,8 @@ class _Part:
     textures: dict[int, str] = field(default_factory=dict)  # texture2d id -> archive path
     items: list[tuple[int, np.ndarray, str | None]] = field(default_factory=list)
     meshes: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = field(default_factory=dict)
+    ns: dict[str, str] = field(default_factory=dict)  # prefixes declared on <model>
+    dup_ids: set[int] = field(default_factory=set)  # resource ids defined twice (the rules report them)
 
 
 def _int_attr(el: Any, name: str, what: str) -> int | None:
@@ -348,6 +373,7 @@ class _Reader:
         self._comp_cache: dict[tuple[str, int], list[tuple[_Part, int, np.ndarray]]] = {}
         self._cost_cache: dict[tuple[str, int], tuple[int, int, int]] = {}
         self.tex_budget = TextureBudget(limits)  # all of the package's textures together
+        self.rules = Rules(zf)
 
     # ---- parts
     def part(self, name: str) -> _Part:
@@ -359,13 +385,34 @@ class _Reader:
         if not self.zf.has(name):
             raise ReadError("malformed", f"the 3MF has no model part {name!r}")
         raw = self.zf.read(name, self.limits.max_xml_bytes, "model part")
+        self.rules.check_encrypted(name, raw)
+        self.rules.xml_prolog(raw, name)
         skeleton, blocks = _fast_blocks(raw, self.marker_ns, self.limits)
-        root = parse_xml(skeleton, f"model part {name!r}", self.limits.max_xml_tree_bytes, self.limits.max_xml_elements)
+        depth = xml_too_deep(skeleton, MAX_XML_DEPTH)
+        if depth is not None:
+            raise ReadError(
+                "over_check_limit",
+                f"model part {name!r} nests XML elements {depth:,} deep, over the checker's limit of "
+                f"{MAX_XML_DEPTH} (a 3MF model nests about 6 deep); refused before parsing",
+            )
+        try:
+            root = parse_xml(skeleton, f"model part {name!r}", self.limits.max_xml_tree_bytes,
+                             self.limits.max_xml_elements)
+        except ReadError as exc:
+            enc = declared_encoding(raw)
+            if exc.code == "malformed" and enc is not None and enc.upper().replace("_", "-") not in ("UTF-8", "UTF8"):
+                raise ReadError("malformed", f"{exc.message} (it is declared as {enc}; 3MF XML must be UTF-8)") from None
+            raise
         if root.tag != _C + "model":
             raise ReadError("malformed", f"model part {name!r} has root <{root.tag}>, not a 3MF core <model>")
-        p = _Part(name=name, unit=root.get("unit", "millimeter"))
+        p = _Part(name=name, unit=root.get("unit", "millimeter"), ns=root_namespaces(raw))
         self.parts[key] = p
+        self.rules.xml_attributes(skeleton, root, name)
+        self.rules.model(name, root, p.ns)
         self._index(p, root, blocks)
+        res = root.find(_C + "resources")
+        if res is not None:
+            self.rules.resources(p, res)
         return p
 
     def _block(self, el: Any, blocks: list[_Block], kind: str) -> Any:
@@ -382,6 +429,13 @@ class _Reader:
             for el in res:
                 rid = _int_attr(el, "id", f"<{el.tag.split('}')[-1]}> in {p.name}")
                 if rid is None:
+                    continue
+                # a repeated id (the rules report it): the first definition of its kind stands; between two
+                # property groups which one a triangle means is unknowable, and those faces read uncoloured
+                if el.tag == _C + "object" and rid in p.objects or el.tag == _M + "texture2d" and rid in p.textures:
+                    continue
+                if rid in p.groups and el.tag in _GROUP_TAGS:
+                    p.dup_ids.add(rid)
                     continue
                 if el.tag == _C + "object":
                     p.objects[rid] = el
@@ -402,7 +456,8 @@ class _Reader:
                     p.groups[rid] = _Group("base", sum(1 for c in el if c.tag == _C + "base"))
                 elif el.tag in (_M + "compositematerials", _M + "multiproperties"):
                     p.groups[rid] = _Group("other", len(el))
-                    self.b.note("ignored_content", f"3MF {el.tag.split('}')[-1]} are counted as colour but not checked further")
+                    self.b.note("ignored_content", f"3MF {el.tag.split('}')[-1]}: faces using them count as coloured, "
+                                                   "but the blended colour itself is not checked")
         build = root.find(_C + "build")
         if build is not None:
             for it in build:
@@ -519,7 +574,9 @@ class _Reader:
             raise ReadError("malformed", f"3MF refers to object {oid}, which {p.name} does not define")
         otype = obj.get("type", "model")
         if otype == "other":
-            self.b.note("ignored_content", "3MF objects of type 'other' are not printed and were skipped")
+            self.rules.violation(
+                f"{p.name}: the build outputs object {oid}, of type 'other'; build items must not reference objects "
+                "of type other, directly or through components (core 3.4.3.1): change its type or remove the item")
             return
         if oid in p.meshes:
             V, F, props = p.meshes[oid]
@@ -557,6 +614,8 @@ class _Reader:
             g_id = int(g_id)
             if g_id < 0:
                 continue
+            if g_id in p.dup_ids:
+                continue  # which of two resources is meant is unknowable: read uncoloured (spec_violation says why)
             sel = pid == g_id
             grp = p.groups.get(g_id)
             if grp is None:
@@ -602,25 +661,13 @@ class _Reader:
                 data = self.zf.read(target, self.limits.max_texture_bytes, "texture")
             except ReadError as exc:
                 return TextureInfo(name=path, status="too_large", message=exc.message)
+            if data[:5] == CIPHER_MAGIC or target.lower() in self.rules.package.encrypted:
+                return TextureInfo(name=path, status="unreadable",
+                                   message=f"texture {path!r} is encrypted (3MF Secure Content); the checker cannot "
+                                           "decrypt it")
             return probe_texture(path, data, self.limits, budget=self.tex_budget)
 
         return self.b.texture(path.lower(), load)
-
-
-def _start_part(zf: SafeZip, limits: Limits) -> str:
-    """The root model part named by ``_rels/.rels`` (or the usual name if there are no rels)."""
-    if zf.has("_rels/.rels"):
-        root = parse_xml(zf.read("_rels/.rels", 1 << 20, "relationships"), "_rels/.rels", 1 << 20)
-        for rel in root.iter("{%s}Relationship" % NS_RELS):
-            if rel.get("Type", "").rstrip("/").lower() == REL_MODEL.lower():
-                target = zip_join("/", rel.get("Target", ""))
-                if target is None:
-                    raise ReadError("archive_unsafe_path", f"the 3MF start part {rel.get('Target')!r} escapes the archive")
-                return target
-    for name in zf.entry_names():
-        if name.lower().endswith(".model"):
-            return name
-    raise ReadError("malformed", "the archive has no 3MF model part (is it a 3MF at all?)")
 
 
 def has_model_part(zf: SafeZip) -> bool:
@@ -632,7 +679,9 @@ def read_3mf(data: bytes | SafeZip, limits: Limits) -> MeshData:
     """Read a 3MF package from its bytes (or an already opened archive)."""
     zf = data if isinstance(data, SafeZip) else SafeZip(data, limits)
     r = _Reader(zf, limits)
-    root = r.part(_start_part(zf, limits))
+    pkg = r.rules.read_package()
+    assert pkg.start is not None  # read_package raises when there is none
+    root = r.part(pkg.start)
     unit = root.unit
     if unit not in UNITS_MM:
         raise ReadError("malformed", f"3MF unit {unit[:40]!r} is not one of {sorted(UNITS_MM)}")
@@ -659,4 +708,5 @@ def read_3mf(data: bytes | SafeZip, limits: Limits) -> MeshData:
         )
     for p, oid, M in items:
         r.instance(p, oid, M, 0)
+    r.b.notes.extend(r.rules.done())
     return r.b.build(unit_mm=UNITS_MM[unit], units=unit, units_stated=True)
