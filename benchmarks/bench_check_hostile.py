@@ -203,9 +203,22 @@ CASES: list[tuple[str, str, Callable[[Path], Path]]] = [
      lambda d: hb.glb_json_bomb(d / "json.glb", 15_000_000)),
 ]
 
+def _plain(path: Path, textured: bool = True) -> Path:
+    """A saucer-like closed heightfield solid of 999,996 triangles (wavy top, flat bottom) in ``path``'s format."""
+    V, F, uv = fx.saucer_solid(n=500)
+    write = {".glb": fx.write_glb, ".obj": fx.write_obj, ".3mf": fx.write_3mf, ".stl": fx.write_stl,
+             ".ply": fx.write_ply}[path.suffix]
+    if textured and path.suffix in (".glb", ".obj", ".3mf"):
+        return write(path, V, F, uv=uv, texture=fx.png_bytes(512, 512))
+    return write(path, V, F)
+
+
 LARGE: list[tuple[str, str, Callable[[Path], Path]]] = [
     ("gltf-100k-instances", "GLB (6 MB), 99,999 instances of a box: 1.2 M triangles, within the limits",
      lambda d: _instances(d / "inst.glb", 99_999)),
+    *[(f"plain-1M-{ext}", f"{ext.upper()}, a saucer-like solid of 1 M triangles" + (", textured" if ext in
+       ("glb", "obj", "3mf") else ""), (lambda e: lambda d: _plain(d / f"big.{e}"))(ext))
+      for ext in ("glb", "obj", "3mf", "stl", "ply")],
 ]
 
 

@@ -12,22 +12,26 @@ import sys
 import time
 
 
-def warm_up() -> list[str]:
-    """Compile every numba kernel on tiny inputs; return what was warmed."""
+def warm_up_check() -> list[str]:
+    """Compile the checker's numba kernels (large meshes, meshopt, the OBJ and 3MF bulk parsers); return their names."""
+    from saucerfab.check.kernels import warm_up as kernels_warm_up
+    from saucerfab.check.readers.meshopt import warm_up as meshopt_warm_up
+    from saucerfab.check.readers.obj_fast import warm_up as obj_warm_up
+    from saucerfab.check.readers.threemf_fast import warm_up as threemf_warm_up
+
+    return [f"check.{k}" for k in (*kernels_warm_up(), *meshopt_warm_up(), *obj_warm_up(), *threemf_warm_up())]
+
+
+def warm_up(*, check: bool = True) -> list[str]:
+    """Compile every numba kernel on tiny inputs (the checker's unless ``check`` is False); return what was warmed."""
     import numpy as np
 
     done: list[str] = []
     from saucerfab.fabricate.kernels import warm_up as fab_warm_up
 
     done += [f"fabricate.{k}" for k in fab_warm_up()]
-    from saucerfab.check.kernels import warm_up as check_warm_up
-
-    done += [f"check.{k}" for k in check_warm_up()]
-    from saucerfab.check.readers.meshopt import warm_up as meshopt_warm_up
-
-    meshopt_warm_up()
-    done.append("check.meshopt")
-    done += [f"check.{k}" for k in __import__("saucerfab.check.readers.obj_fast", fromlist=["warm_up"]).warm_up()]
+    if check:
+        done += warm_up_check()
 
     import torch
 
@@ -47,12 +51,23 @@ def warm_up() -> list[str]:
 
 
 def main() -> int:
+    import subprocess
+
     t0 = time.perf_counter()
+    # numba compiles on one core: the checker's kernels compile in a second process meanwhile (each kernel
+    # has its own cache file, so the two never write the same one)
+    code = "from saucerfab.warmup import warm_up_check; print(len(warm_up_check()))"
+    child = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        names = warm_up()
+        names = warm_up(check=False)
     except Exception as exc:  # noqa: BLE001 - a cache warm-up must never break an install
         print(f"saucerfab warm-up skipped: {exc}", file=sys.stderr)
-        return 0
+        names = []
+    out, err = child.communicate()
+    if child.returncode == 0:
+        names += ["check"] * int(out.strip() or 0)
+    else:
+        print(f"saucerfab warm-up of the checker's kernels skipped: {err.strip().splitlines()[-1:]}", file=sys.stderr)
     print(f"saucerfab: compiled {len(names)} kernels in {time.perf_counter() - t0:.1f} s")
     return 0
 

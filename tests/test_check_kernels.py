@@ -76,22 +76,48 @@ def test_check_reports_alike_on_the_numba_and_numpy_paths(tmp_path: Path, monkey
     assert "self_intersections" in {f["code"] for f in fast["findings"]}
 
 
-def test_the_numba_cull_never_clears_a_pair_the_exact_test_finds() -> None:
-    """Random soups with shared vertices, shared edges and coplanar pairs: cull + exact == exact alone."""
-    from saucerfab.check.bvh import cross3, dot3, pair_intersections
-    from saucerfab.check.kernels import needs_exact_test
+def _lattice_pairs(seed: int, flat: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(tri, fv, normals, a, b): random triangles on a coarse lattice and 300k random pairs of them.
 
-    rng = np.random.default_rng(7)
-    P = rng.integers(0, 6, (400, 3)).astype(float) / 5  # a coarse lattice: many coplanar and touching pairs
-    fv = rng.integers(0, 400, (3000, 3))
+    Many pairs are coplanar, touching, or share a vertex or an edge; with
+    ``flat`` a third of the triangles lie in one plane (as a saucer's bottom).
+    """
+    from saucerfab.check.bvh import cross3
+
+    rng = np.random.default_rng(seed)
+    P = rng.integers(0, 5, (300, 3)).astype(float) / 4
+    if flat:
+        P[:100, 2] = 0.0
+    fv = np.concatenate([rng.integers(0, 100, (1500, 3)), rng.integers(0, 300, (1500, 3))])
     fv = fv[(fv[:, 0] != fv[:, 1]) & (fv[:, 1] != fv[:, 2]) & (fv[:, 0] != fv[:, 2])]
     tri = P[fv]
     nrm = cross3(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    a = rng.integers(0, len(fv), 200_000)
-    b = rng.integers(0, len(fv), 200_000)
+    return tri, fv, nrm, rng.integers(0, len(fv), 300_000), rng.integers(0, len(fv), 300_000)
+
+
+@pytest.mark.parametrize("seed, flat", [(7, False), (8, True)])
+def test_the_numba_cull_never_clears_a_pair_the_exact_test_finds(seed: int, flat: bool) -> None:
+    """cull + exact == exact alone."""
+    from saucerfab.check.bvh import dot3, pair_intersections
+    from saucerfab.check.kernels import needs_exact_test
+
+    tri, fv, nrm, a, b = _lattice_pairs(seed, flat)
     ref = pair_intersections(tri, fv, nrm, a, b, 1e-9)
     keep = needs_exact_test(tri, fv, nrm, np.sqrt(dot3(nrm, nrm)), a, b, 1e-9)
     assert ref.any() and (~keep).sum() > len(a) // 4  # the cull does clear pairs, and the exact test finds some
     got = np.zeros(len(a), dtype=bool)
     got[keep] = pair_intersections(tri, fv, nrm, a[keep], b[keep], 1e-9)
+    assert np.array_equal(got, ref)
+
+
+@pytest.mark.parametrize("seed, flat", [(7, True), (8, True), (9, False)])
+def test_the_numba_exact_test_equals_the_numpy_one(seed: int, flat: bool) -> None:
+    """Pair by pair in numba == numpy's staged test, branch for branch (folds, sectors, coplanar, crossing)."""
+    from saucerfab.check.bvh import dot3, pair_intersections
+    from saucerfab.check.kernels import pair_intersections_fast
+
+    tri, fv, nrm, a, b = _lattice_pairs(seed, flat)
+    ref = pair_intersections(tri, fv, nrm, a, b, 1e-9)
+    got = pair_intersections_fast(tri, fv, nrm, np.sqrt(dot3(nrm, nrm)), a, b, 1e-9)
+    assert ref.sum() > 1000 and not ref.all()
     assert np.array_equal(got, ref)

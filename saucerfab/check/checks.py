@@ -334,20 +334,17 @@ def _self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndar
     budget = min(limits.max_pair_tests, 100 * m + 1_000_000)
 
     nrm = cross3(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    cull = None
+    exact = lambda a, b: pair_intersections(tri, Fg, nrm, a, b, eps)  # noqa: E731
     if m >= bvh_mod.FAST_FROM_TRIANGLES:
-        # numba clears the pairs that the exact test's first, plane-side stages would (most neighbours),
-        # in one pass without temporaries; the exact test then runs on the few left
-        from saucerfab.check.kernels import needs_exact_test
+        # the same test pair by pair in numba: no temporaries per stage, and a flat bottom's millions of
+        # coplanar neighbour pairs (sector and fold tests) cost microseconds each, not numpy passes
+        from saucerfab.check.kernels import pair_intersections_fast
 
         nlen = np.sqrt(dot3(nrm, nrm))
-        cull = lambda a, b: needs_exact_test(tri, Fg, nrm, nlen, a, b, eps)  # noqa: E731
+        exact = lambda a, b: pair_intersections_fast(tri, Fg, nrm, nlen, a, b, eps)  # noqa: E731
 
     def narrow(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        if cull is not None:
-            keep = cull(a, b)
-            a, b = a[keep], b[keep]
-        hit = pair_intersections(tri, Fg, nrm, a, b, eps)
+        hit = exact(a, b)
         return np.stack([a[hit], b[hit]], axis=1)
 
     found: list[np.ndarray] = []

@@ -173,6 +173,202 @@ def needs_exact_test(tri: np.ndarray, fv: np.ndarray, nrm: np.ndarray, nlen: np.
     return out
 
 
+
+# -- the exact pair test, pair by pair (bvh.pair_intersections is its reference: same operations, same order) ----
+
+
+@njit(cache=True, nogil=True)
+def _cross(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> tuple[float, float, float]:
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True, nogil=True)
+def _segment_hits(p: np.ndarray, q: np.ndarray, t: np.ndarray, eps: float) -> bool:
+    """:func:`saucerfab.check.bvh.segment_hits_triangle` for one segment p-q (3,) and triangle t (3, 3)."""
+    n0, n1, n2 = _cross(t[1, 0] - t[0, 0], t[1, 1] - t[0, 1], t[1, 2] - t[0, 2],
+                        t[2, 0] - t[0, 0], t[2, 1] - t[0, 1], t[2, 2] - t[0, 2])
+    nn2 = n0 * n0 + n1 * n1 + n2 * n2
+    nn = np.sqrt(nn2)
+    if not nn > 0:
+        return False
+    dp = ((p[0] - t[0, 0]) * n0 + (p[1] - t[0, 1]) * n1 + (p[2] - t[0, 2]) * n2) / nn
+    dq = ((q[0] - t[0, 0]) * n0 + (q[1] - t[0, 1]) * n1 + (q[2] - t[0, 2]) * n2) / nn
+    if not ((dp > eps and dq < -eps) or (dp < -eps and dq > eps)):
+        return False
+    r = dp / (dp - dq)
+    x0 = p[0] + (q[0] - p[0]) * r
+    x1 = p[1] + (q[1] - p[1]) * r
+    x2 = p[2] + (q[2] - p[2]) * r
+    for k in range(3):  # barycentric of x against edge k+1 -> k+2
+        i = (k + 1) % 3
+        j = (k + 2) % 3
+        c0, c1, c2 = _cross(t[j, 0] - t[i, 0], t[j, 1] - t[i, 1], t[j, 2] - t[i, 2],
+                            x0 - t[i, 0], x1 - t[i, 1], x2 - t[i, 2])
+        if not (c0 * n0 + c1 * n1 + c2 * n2) / nn2 >= -1e-9:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _proj(v0: float, v1: float, v2: float, drop: int) -> tuple[float, float]:
+    if drop == 0:
+        return v1, v2
+    if drop == 1:
+        return v0, v2
+    return v0, v1
+
+
+@njit(cache=True, nogil=True)
+def _drop_axis(n: np.ndarray) -> int:
+    """np.argmax(np.abs(n)): the first of the largest."""
+    d = 0
+    if abs(n[1]) > abs(n[d]):
+        d = 1
+    if abs(n[2]) > abs(n[d]):
+        d = 2
+    return d
+
+
+@njit(cache=True, nogil=True)
+def _coplanar_overlap(A: np.ndarray, B: np.ndarray, n: np.ndarray, eps: float) -> bool:
+    """:func:`saucerfab.check.bvh._coplanar_overlap` for one pair: no separating edge normal in 2D."""
+    drop = _drop_axis(n)
+    P = np.empty((2, 3, 2))
+    for c in range(3):
+        P[0, c, 0], P[0, c, 1] = _proj(A[c, 0], A[c, 1], A[c, 2], drop)
+        P[1, c, 0], P[1, c, 1] = _proj(B[c, 0], B[c, 1], B[c, 2], drop)
+    for e in range(6):
+        w = e // 3
+        c = e % 3
+        ex = P[w, (c + 1) % 3, 0] - P[w, c, 0]
+        ey = P[w, (c + 1) % 3, 1] - P[w, c, 1]
+        nx = -ey
+        ny = ex
+        la = np.sqrt(nx * nx + ny * ny)
+        if la == 0:
+            return False
+        tol = eps * la
+        amax = -np.inf
+        amin = np.inf
+        bmax = -np.inf
+        bmin = np.inf
+        for k in range(3):
+            pa = P[0, k, 0] * nx + P[0, k, 1] * ny
+            pb = P[1, k, 0] * nx + P[1, k, 1] * ny
+            amax = max(amax, pa)
+            amin = min(amin, pa)
+            bmax = max(bmax, pb)
+            bmin = min(bmin, pb)
+        if amax <= bmin + tol or bmax <= amin + tol:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _side(sgn: float, ux: float, uy: float, wx: float, wy: float) -> float:
+    return sgn * (ux * wy - uy * wx) / max(np.sqrt(ux * ux + uy * uy), 1e-300)
+
+
+@njit(cache=True, nogil=True)
+def _strictly_in(sgn: float, ux: float, uy: float, vx: float, vy: float, wx: float, wy: float, tol: float) -> bool:
+    return _side(sgn, ux, uy, wx, wy) > tol and _side(sgn, wx, wy, vx, vy) > tol
+
+
+@njit(cache=True, nogil=True)
+def _sectors_overlap(A: np.ndarray, B: np.ndarray, n: np.ndarray, ia: int, ib: int, eps: float) -> bool:
+    """:func:`saucerfab.check.bvh._sectors_overlap` for one pair sharing corner ``ia`` of A, ``ib`` of B."""
+    drop = _drop_axis(n)
+    sgn = np.sign(n[drop])
+    s = A[ia]
+    a1x, a1y = _proj(A[(ia + 1) % 3, 0] - s[0], A[(ia + 1) % 3, 1] - s[1], A[(ia + 1) % 3, 2] - s[2], drop)
+    a2x, a2y = _proj(A[(ia + 2) % 3, 0] - s[0], A[(ia + 2) % 3, 1] - s[1], A[(ia + 2) % 3, 2] - s[2], drop)
+    b1x, b1y = _proj(B[(ib + 1) % 3, 0] - s[0], B[(ib + 1) % 3, 1] - s[1], B[(ib + 1) % 3, 2] - s[2], drop)
+    b2x, b2y = _proj(B[(ib + 2) % 3, 0] - s[0], B[(ib + 2) % 3, 1] - s[1], B[(ib + 2) % 3, 2] - s[2], drop)
+    tol = eps * np.sqrt(max(a1x * a1x + a1y * a1y, b1x * b1x + b1y * b1y))
+    if not _side(sgn, a1x, a1y, a2x, a2y) > 0:  # orient each sector counter-clockwise
+        a1x, a1y, a2x, a2y = a2x, a2y, a1x, a1y
+    if not _side(sgn, b1x, b1y, b2x, b2y) > 0:
+        b1x, b1y, b2x, b2y = b2x, b2y, b1x, b1y
+    if (_strictly_in(sgn, a1x, a1y, a2x, a2y, b1x, b1y, tol) or _strictly_in(sgn, a1x, a1y, a2x, a2y, b2x, b2y, tol)
+            or _strictly_in(sgn, b1x, b1y, b2x, b2y, a1x, a1y, tol)
+            or _strictly_in(sgn, b1x, b1y, b2x, b2y, a2x, a2y, tol)):
+        return True
+    return (abs(_side(sgn, a1x, a1y, b1x, b1y)) <= tol and abs(_side(sgn, a2x, a2y, b2x, b2y)) <= tol
+            and a1x * b1x + a1y * b1y > 0 and a2x * b2x + a2y * b2y > 0)
+
+
+@njit(cache=True, nogil=True)
+def _folded(A: np.ndarray, n: np.ndarray, sa: int, ta: int, lone_a: int, b_lone: np.ndarray, eps: float) -> bool:
+    """:func:`saucerfab.check.bvh._folded` for one pair sharing A's edge sa-ta (in corner order)."""
+    s = A[sa]
+    t0, t1, t2 = A[ta, 0] - s[0], A[ta, 1] - s[1], A[ta, 2] - s[2]
+    c0, c1, c2 = _cross(t0, t1, t2, A[lone_a, 0] - s[0], A[lone_a, 1] - s[1], A[lone_a, 2] - s[2])
+    side_a = c0 * n[0] + c1 * n[1] + c2 * n[2]
+    c0, c1, c2 = _cross(t0, t1, t2, b_lone[0] - s[0], b_lone[1] - s[1], b_lone[2] - s[2])
+    side_b = c0 * n[0] + c1 * n[1] + c2 * n[2]
+    tol = eps * np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) * np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    return (side_a > tol and side_b > tol) or (side_a < -tol and side_b < -tol)
+
+
+@njit(cache=True, nogil=True)
+def pair_intersections_fast(tri: np.ndarray, fv: np.ndarray, nrm: np.ndarray, nlen: np.ndarray,
+                            a: np.ndarray, b: np.ndarray, eps: float) -> np.ndarray:
+    """:func:`saucerfab.check.bvh.pair_intersections`, pair by pair: which pairs (tri[a[k]], tri[b[k]]) cross.
+
+    The same tests in the same order with the same float operations (the
+    tests compare the two on lattices full of coplanar, touching and
+    edge-sharing pairs); the numpy function stays the reference and serves
+    small meshes. tri (m, 3, 3), fv (m, 3) welded vertex ids, nrm (m, 3)
+    normals of length nlen (m,); a / b (k,); returns (k,) bool.
+    """
+    out = np.zeros(len(a), dtype=np.bool_)
+    keep = needs_exact_test(tri, fv, nrm, nlen, a, b, eps)
+    for k in range(len(a)):
+        if not keep[k]:
+            continue
+        i = a[k]
+        j = b[k]
+        A = tri[i]
+        B = tri[j]
+        in_a = np.zeros(3, dtype=np.bool_)
+        in_b = np.zeros(3, dtype=np.bool_)
+        for ca in range(3):
+            for cb in range(3):
+                if fv[i, ca] == fv[j, cb]:
+                    in_a[ca] = True
+                    in_b[cb] = True
+        shared = int(in_a[0]) + int(in_a[1]) + int(in_a[2])
+        if shared == 2:  # kept only when coplanar: a fold?
+            lone_b = 0 if not in_b[0] else (1 if not in_b[1] else 2)
+            lone_a = 0 if not in_a[0] else (1 if not in_a[1] else 2)
+            sa = 0 if lone_a != 0 else 1
+            ta = 2 if lone_a != 2 else 1
+            out[k] = _folded(A, nrm[i], sa, ta, lone_a, B[lone_b], eps)
+            continue
+        # kept with shared < 2: coplanar, or straddling both planes
+        s = nlen[i]
+        coplanar = True
+        for c in range(3):
+            d = ((B[c, 0] - A[0, 0]) * (nrm[i, 0] / s) + (B[c, 1] - A[0, 1]) * (nrm[i, 1] / s)
+                 + (B[c, 2] - A[0, 2]) * (nrm[i, 2] / s))
+            if abs(d) > eps:
+                coplanar = False
+        if coplanar:
+            if shared == 0:
+                out[k] = _coplanar_overlap(A, B, nrm[i], eps)
+            else:
+                ia = 0 if in_a[0] else (1 if in_a[1] else 2)
+                ib = 0 if in_b[0] else (1 if in_b[1] else 2)
+                out[k] = _sectors_overlap(A, B, nrm[i], ia, ib, eps)
+            continue
+        hit = False
+        for c in range(3):
+            if (_segment_hits(A[c], A[(c + 1) % 3], B, eps) or _segment_hits(B[c], B[(c + 1) % 3], A, eps)):
+                hit = True
+                break
+        out[k] = hit
+    return out
+
 def warm_up() -> list[str]:
     """Compile every kernel here on tiny inputs (``python -m saucerfab.warmup``); return their names."""
     from saucerfab.check.bvh import BVH
@@ -187,6 +383,8 @@ def warm_up() -> list[str]:
                 out.copy(), 10)
     fv = np.array([[0, 1, 2], [3, 4, 5]])
     nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    needs_exact_test(tri, fv, nrm, np.sqrt((nrm * nrm).sum(axis=1)), np.array([0]), np.array([1]), 1e-9)
+    nlen = np.sqrt((nrm * nrm).sum(axis=1))
+    needs_exact_test(tri, fv, nrm, nlen, np.array([0]), np.array([1]), 1e-9)
+    pair_intersections_fast(tri, fv, nrm, nlen, np.array([0]), np.array([1]), 1e-9)
     components_uf(3, np.array([0]), np.array([1]))
-    return ["pair_search", "needs_exact_test", "components_uf"]
+    return ["pair_search", "needs_exact_test", "pair_intersections_fast", "components_uf"]

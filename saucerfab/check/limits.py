@@ -8,10 +8,10 @@ checked separately and give "not printable" findings, while a file over a
 checker limit is refused as unreadable (exit 2) with the limit's name in
 the message, so the user knows which knob to turn.
 
-Defaults suit a machine with 8 GB or more: checking takes about 1 GB of
-memory per million triangles at peak, so the largest file accepted (5
-million triangles) needs about 5 GB, and a 10-million-face file is refused
-from its header (see ``max_triangles``).
+Defaults suit a machine with 8 GB or more: checking takes about 0.9 GB of
+memory and 10 s (2 cores) per million triangles, so the largest file
+accepted (5 million triangles) needs about 5 GB and a minute, and a
+10-million-face file is refused from its header (see ``max_triangles``).
 
 Budgets against amplification (issue 16): what a file *makes* the checker
 do is bounded, not only what it holds - bytes inflated from an archive

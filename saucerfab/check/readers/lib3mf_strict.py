@@ -55,7 +55,7 @@ from saucerfab.check.report import Finding, finding
 
 #: wall-clock seconds a file may take: a base plus a share per megabyte of the (compressed) file; lib3mf
 #: reads a 1-million-triangle, 11 MB 3MF (70 MB of XML) in ~1.5 s on the 2-core development machine
-TIMEOUT_BASE_S = 20.0
+TIMEOUT_BASE_S = 8.0  # a small file lib3mf chokes on costs at most this, near the checker's 10 s a file
 TIMEOUT_PER_MB_S = 0.5
 TIMEOUT_MAX_S = 300.0
 #: address space the reading process may use: a base plus a multiple of the file. That 1-million-triangle

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import re
 import secrets
+import sys
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -153,10 +154,10 @@ def _fast_blocks(data: bytes, marker_ns: str, limits: Limits) -> tuple[bytes, li
     blocks: list[_Block] = []
     pos = 0
     n_vert = n_tri = 0
-    for m in _BLOCK_START.finditer(data):
-        if m.start() < pos:
-            continue
-        start = m.end()
+    at = 0
+    fast = _use_fast(len(data))
+    while (m := _BLOCK_START.search(data, at)) is not None:  # from the last block's end: blocks are not rescanned
+        start = at = m.end()
         if m.group(1) is not None:
             kind = m.group(1).decode()
             end = data.find(b"</" + m.group(1) + b">", start)
@@ -180,13 +181,13 @@ def _fast_blocks(data: bytes, marker_ns: str, limits: Limits) -> tuple[bytes, li
                 f"{limits.max_triangles:,} triangles, the checker's limits (Limits.max_vertices, "
                 "Limits.max_triangles; --max-triangles raises the latter)",
             )
-        parsed = _parse_block(kind, content, m.group(2) or b"")
+        parsed = _parse_block(kind, content, m.group(2) or b"", fast)
         if parsed is None:
             continue
         pieces.append(data[pos:start])
         pieces.append(b'<sfblk xmlns="%s" i="%d"/>' % (marker_ns.encode(), len(blocks)))
         blocks.append(_Block(kind, parsed))
-        pos = end
+        pos = at = end
     if not blocks:
         return data, []
     pieces.append(data[pos:])
@@ -258,8 +259,27 @@ def _span_ints(buf: np.ndarray, st: np.ndarray, en: np.ndarray) -> np.ndarray | 
     return acc
 
 
-def _parse_block(kind: str, content: bytes, prefix: bytes) -> Any:
-    """The numbers of one bulk block, or None to leave it to the XML parser."""
+#: a model part at least this long has its blocks of FAST_3MF_BLOCK_BYTES or more offered to the numba
+#: parser (threemf_fast) first: importing numba and its first call cost ~1.1 s, what the code below spends
+#: on ~25 MB of blocks (and check_mesh loads numba itself from ~200k triangles). Once that parser is loaded
+#: in the process, any part's blocks are offered to it.
+FAST_3MF_PART_BYTES = 24 << 20
+FAST_3MF_BLOCK_BYTES = 256 << 10
+
+
+def _use_fast(part_bytes: int) -> bool:
+    loaded = sys.modules.get("saucerfab.check.readers.threemf_fast")
+    return part_bytes >= FAST_3MF_PART_BYTES or (loaded is not None and loaded.ready())
+
+
+def _parse_block(kind: str, content: bytes, prefix: bytes, fast: bool = False) -> Any:
+    """The numbers of one bulk block, or None to leave it to the XML parser (``fast``: try threemf_fast first)."""
+    if fast and len(content) >= FAST_3MF_BLOCK_BYTES:
+        from saucerfab.check.readers.threemf_fast import parse_block as parse_fast
+
+        got = parse_fast(kind, content, prefix)  # None where it leaves the block to the code below
+        if got is not None:
+            return got
     if b"&" in content or b"<!" in content or b"<?" in content:
         return None
     tag = {"vertices": b"vertex", "triangles": b"triangle", "tex2coord": prefix + b"tex2coord"}[kind]
