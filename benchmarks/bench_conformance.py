@@ -26,8 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))  # the suites and reference readers live with the tests
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-import conformance as cf  # noqa: E402
-from bench_check_hostile import machine, uptime  # noqa: E402
+import conformance as cf
+from bench_check_hostile import machine, uptime
 
 README = ROOT / "saucerfab" / "check" / "README.md"
 BEGIN, END = "<!-- conformance:begin -->", "<!-- conformance:end -->"

@@ -145,7 +145,7 @@ def lib3mf_strict(path: Path) -> tuple[str, str]:
     reader.SetStrictModeActive(True)
     try:
         reader.ReadFromFile(os.fspath(path))
-    except Exception as exc:  # noqa: BLE001 - lib3mf raises its own ELib3MFException
+    except Exception as exc:
         return "rejects", str(exc).splitlines()[0][:200]
     n = reader.GetWarningCount()
     if n:

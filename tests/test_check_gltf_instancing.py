@@ -5,13 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 import fixtures_check as fx
+import numpy as np
+from test_check_budgets import glb_with
+
 from saucerfab.check import check_mesh
 from saucerfab.check.limits import DEFAULT_LIMITS
 from saucerfab.check.readers import read_mesh
-from test_check_budgets import glb_with
 
 
 def _trs(node: dict[str, Any]) -> np.ndarray:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import fixtures_check as fx
 import numpy as np
 import pytest
 
-import fixtures_check as fx
 import saucerfab.check.bvh as bvh_mod
 from saucerfab.check import check_mesh
 from saucerfab.check.bvh import BVH

@@ -16,9 +16,8 @@ the Khronos glTF-Validator for glTF), and the verdicts are compared:
 
 from __future__ import annotations
 
-import pytest
-
 import conformance as cf
+import pytest
 
 MAX_SECONDS = 30.0
 

@@ -124,7 +124,7 @@ def check_mesh(
         f = Finding("error", "malformed", "the file nests too deeply to read")
         return Report.build(spath, fmt, [f], {"file_bytes": file_bytes}, printer=key, strict=strict,
                             elapsed_s=time.perf_counter() - t0)
-    except Exception as exc:  # noqa: BLE001 - a checker bug must still give a clean result, not a traceback
+    except Exception as exc:
         f = Finding("error", "internal_error", f"the checker failed: {type(exc).__name__}: {exc}")
         return Report.build(spath, fmt, [f], {"file_bytes": file_bytes}, printer=key, strict=strict,
                             elapsed_s=time.perf_counter() - t0)

@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-
 #: meshes with at least this many triangles use the numba kernels of :mod:`saucerfab.check.kernels`
 #: (importing numba costs ~0.7 s of start-up: below this, numpy is done sooner)
 FAST_FROM_TRIANGLES = 200_000

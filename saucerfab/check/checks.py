@@ -334,14 +334,14 @@ def _self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndar
     budget = min(limits.max_pair_tests, 100 * m + 1_000_000)
 
     nrm = cross3(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    exact = lambda a, b: pair_intersections(tri, Fg, nrm, a, b, eps)  # noqa: E731
+    exact = lambda a, b: pair_intersections(tri, Fg, nrm, a, b, eps)
     if m >= bvh_mod.FAST_FROM_TRIANGLES:
         # the same test pair by pair in numba: no temporaries per stage, and a flat bottom's millions of
         # coplanar neighbour pairs (sector and fold tests) cost microseconds each, not numpy passes
         from saucerfab.check.kernels import pair_intersections_fast
 
         nlen = np.sqrt(dot3(nrm, nrm))
-        exact = lambda a, b: pair_intersections_fast(tri, Fg, nrm, nlen, a, b, eps)  # noqa: E731
+        exact = lambda a, b: pair_intersections_fast(tri, Fg, nrm, nlen, a, b, eps)
 
     def narrow(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         hit = exact(a, b)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+
 @njit(cache=True)
 def _find(parent: np.ndarray, x: int) -> int:
     while parent[x] != x:

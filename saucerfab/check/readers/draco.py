@@ -124,7 +124,7 @@ def decode(data: bytes) -> tuple[np.ndarray, dict[int, np.ndarray]]:
 
     try:
         mesh = DracoPy.decode(bytes(data))
-    except Exception as exc:  # noqa: BLE001 - DracoPy raises its own exception types and ValueError/RuntimeError
+    except Exception as exc:
         # DracoPy says "not draco encoded" for every failure; the signature was checked, so it is corrupt
         raise DracoError(f"the Draco stream is corrupt: Google's Draco decoder refuses it ({type(exc).__name__})"
                          ) from None

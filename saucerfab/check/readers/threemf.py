@@ -50,7 +50,13 @@ import numpy as np
 
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
-from saucerfab.check.readers.safe import SafeZip, TextureBudget, parse_xml, probe_texture, zip_join
+from saucerfab.check.readers.safe import (
+    SafeZip,
+    TextureBudget,
+    parse_xml,
+    probe_texture,
+    zip_join,
+)
 from saucerfab.check.readers.threemf_rules import (
     CIPHER_MAGIC,
     MAX_XML_DEPTH,
