@@ -90,6 +90,9 @@ class Limits:
             priced before the walk, so a tree whose every node lists the
             next twice is refused by its count, not walked.
         max_nesting: deepest component/node/VRML nesting followed.
+        max_xml_depth: deepest element nesting of a 3MF model part, found
+            by a scan before the XML is parsed (a model nests about 6 deep;
+            extensions add a few levels).
         max_vrml_tokens: most VRML tokens outside number arrays (node and
             field names, braces, strings; a few microseconds each).
         thin_wall_samples: surface points whose wall thickness is measured
@@ -150,6 +153,7 @@ class Limits:
     max_parts: int = 100_000
     max_node_visits: int = 400_000
     max_nesting: int = 32
+    max_xml_depth: int = 64
     max_vrml_tokens: int = 1_000_000
     thin_wall_samples: int = 4096
     max_ray_tests: int = 20_000_000

@@ -59,7 +59,6 @@ from saucerfab.check.readers.safe import (
 )
 from saucerfab.check.readers.threemf_rules import (
     CIPHER_MAGIC,
-    MAX_XML_DEPTH,
     NS_CORE,
     NS_MAT,
     NS_PROD,
@@ -414,12 +413,13 @@ class _Reader:
         self.rules.check_encrypted(name, raw)
         self.rules.xml_prolog(raw, name)
         skeleton, blocks = _fast_blocks(raw, self.marker_ns, self.limits)
-        depth = xml_too_deep(skeleton, MAX_XML_DEPTH)
+        depth = xml_too_deep(skeleton, self.limits.max_xml_depth)
         if depth is not None:
             raise ReadError(
                 "over_check_limit",
                 f"model part {name!r} nests XML elements {depth:,} deep, over the checker's limit of "
-                f"{MAX_XML_DEPTH} (a 3MF model nests about 6 deep); refused before parsing",
+                f"{self.limits.max_xml_depth} (a 3MF model nests about 6 deep; Limits.max_xml_depth); refused "
+                "before parsing",
             )
         try:
             root = parse_xml(skeleton, f"model part {name!r}", self.limits.max_xml_tree_bytes,

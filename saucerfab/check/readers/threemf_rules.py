@@ -114,9 +114,6 @@ BLEND_METHODS = frozenset({"mix", "multiply"})
 #: the first part of an encrypted part (3MF Secure Content, Appendix D)
 CIPHER_MAGIC = b"%3McF"
 
-#: deepest XML nesting read (a 3MF model nests 6 deep: model/resources/object/mesh/vertices/vertex;
-#: extensions add a few levels)
-MAX_XML_DEPTH = 64
 #: spec_violation findings listed one by one; past this, one more says how many were left out
 MAX_VIOLATIONS = 25
 
@@ -149,7 +146,7 @@ def _kind_name(kind: str) -> str:
 # -- cheap scans before parsing ---------------------------------------------------------------
 
 
-def xml_too_deep(data: bytes, limit: int = MAX_XML_DEPTH) -> int | None:
+def xml_too_deep(data: bytes, limit: int) -> int | None:
     """The nesting depth of ``data`` if it is over ``limit``, else None, without parsing it.
 
     A numpy pass over the ``<`` positions: ``</`` closes, ``<?``/``<!``
