@@ -110,21 +110,11 @@ def _vrml_tokens(path: Path, n_groups: int) -> Path:
 
 def _vertices_3mf(path: Path, n: int) -> Path:
     """A 3MF of ``n`` identical vertices (fast-path grammar) and one triangle: 27 bytes each, deflated 400:1."""
-    import zipfile
-
     head = (f'<?xml version="1.0"?><model unit="millimeter" xmlns="{fx.NS_CORE}"><resources><object id="1" '
             'type="model"><mesh><vertices>').encode()
-    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("[Content_Types].xml", fx.CONTENT_TYPES)
-        z.writestr("_rels/.rels", fx.RELS)
-        with z.open("3D/3dmodel.model", "w", force_zip64=True) as fh:
-            fh.write(head)
-            block = b'<vertex x="0" y="0" z="0"/>' * 100_000
-            for _ in range(n // 100_000):
-                fh.write(block)
-            fh.write(b'</vertices><triangles><triangle v1="0" v2="1" v3="2"/></triangles></mesh></object>'
-                     b'</resources><build><item objectid="1"/></build></model>')
-    return path
+    return hb.streamed_3mf(path, head, b'<vertex x="0" y="0" z="0"/>', n,
+                           b'</vertices><triangles><triangle v1="0" v2="1" v3="2"/></triangles></mesh></object>'
+                           b'</resources><build><item objectid="1"/></build></model>')
 
 
 def _zipped(path: Path, name: str, body: bytes) -> Path:

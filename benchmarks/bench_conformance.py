@@ -26,8 +26,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))  # the suites and reference readers live with the tests
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-import conformance as cf
-from bench_check_hostile import machine, uptime
+import conformance as cf  # noqa: E402 - found through the path above
+from bench_check_hostile import machine, uptime  # noqa: E402
+
+from saucerfab.fileio import write_text_atomic  # noqa: E402
 
 README = ROOT / "saucerfab" / "check" / "README.md"
 BEGIN, END = "<!-- conformance:begin -->", "<!-- conformance:end -->"
@@ -86,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     head = f"Measured on {machine()}; {uptime()}. Rerun: `.venv/bin/python benchmarks/bench_conformance.py --readme`."
     print(head + "\n\n" + md)
     if args.out:
-        args.out.write_text(json.dumps(
+        write_text_atomic(args.out, json.dumps(
             [{"suite": r.suite, "file": r.name, "label": r.expected, "reference": r.reference,
               "reference_message": r.reference_message, "verdict": r.verdict, "codes": r.codes,
               "outcome": r.outcome, "elapsed_s": round(r.elapsed_s, 4)} for rs in rows.values() for r in rs],
@@ -100,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         pre, rest = text.split(BEGIN, 1)
         _, post = rest.split(END, 1)
-        README.write_text(pre + BEGIN + "\n" + head + "\n\n" + md + "\n" + END + post)
+        write_text_atomic(README, pre + BEGIN + "\n" + head + "\n\n" + md + "\n" + END + post)
     return 0
 
 

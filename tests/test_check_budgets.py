@@ -133,20 +133,25 @@ def zipped_obj_with_textures(path: Path, textures: list[bytes]) -> Path:
     return path
 
 
-def xml_element_bomb_3mf(path: Path, n_elements: int) -> Path:
-    """A 3MF whose model part holds ``n_elements`` empty elements (no fast path: parsed as a tree)."""
-    head = f'<?xml version="1.0"?><model unit="millimeter" xmlns="{fx.NS_CORE}"><resources>'.encode()
+def streamed_3mf(path: Path, head: bytes, unit: bytes, n: int, tail: bytes) -> Path:
+    """A deflated 3MF whose model part is ``head + unit * n + tail``, written a block at a time (never held whole)."""
     with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("[Content_Types].xml", fx.CONTENT_TYPES)
         z.writestr("_rels/.rels", fx.RELS)
         with z.open("3D/3dmodel.model", "w", force_zip64=True) as fh:
             fh.write(head)
-            block = b"<a/>" * 100_000
-            for _ in range(n_elements // 100_000):
+            block = unit * 100_000
+            for _ in range(n // 100_000):
                 fh.write(block)
-            fh.write(b"<a/>" * (n_elements % 100_000))
-            fh.write(b"</resources><build/></model>")
+            fh.write(unit * (n % 100_000))
+            fh.write(tail)
     return path
+
+
+def xml_element_bomb_3mf(path: Path, n_elements: int) -> Path:
+    """A 3MF whose model part holds ``n_elements`` empty elements (no fast path: parsed as a tree)."""
+    head = f'<?xml version="1.0"?><model unit="millimeter" xmlns="{fx.NS_CORE}"><resources>'.encode()
+    return streamed_3mf(path, head, b"<a/>", n_elements, b"</resources><build/></model>")
 
 
 def glb_json_bomb(path: Path, n_values: int) -> Path:
