@@ -37,6 +37,8 @@ MIN_IMAGE_SIZE, MAX_IMAGE_SIZE = 8, 4096
 MIN_GRID, MAX_GRID = 4, 1024
 #: least sine of a view axis's angle to the vertical (see Scene.__post_init__)
 MIN_VIEW_TILT = 1e-9
+#: the views a scene can have, in order: each has a frame, an input picture and a rendered image
+VIEW_NAMES = ("direct", "reflected", "reflected2")
 
 
 def _finite(name: str, *values: float) -> None:

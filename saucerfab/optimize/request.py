@@ -9,6 +9,10 @@ from pathlib import Path
 from typing import Any
 
 from saucerfab.errors import ConfigError
+from saucerfab.scene import VIEW_NAMES
+
+#: the request's image fields: one picture per view, and its optional foreground mask
+IMAGE_ROLES = VIEW_NAMES + tuple(f"{v}_mask" for v in VIEW_NAMES)
 
 #: conflict-reduction strategies of the full method: "subject" is the paper's
 #: black-white enhancement (each picture needs a clear subject), "none" uses the
