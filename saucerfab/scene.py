@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import os
 import tomllib
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Literal, Union
 
@@ -551,7 +551,3 @@ def load_scene(source: str | os.PathLike[str]) -> Scene:
         ) from None
     return scene_from_dict(data)
 
-
-def scene_equal(a: Scene, b: Scene) -> bool:
-    """Value equality (dataclass equality already compares fields)."""
-    return asdict(a) == asdict(b)
