@@ -102,7 +102,7 @@ def prepare(request: DesignRequest) -> Prepared:
     from saucerfab.heightfield import load_shape
 
     scene = build_scene(request)
-    if request.reflected2 is not None and scene.cup.kind != "prism":
+    if request.reflected2 is not None and not scene.cup.faceted:
         raise ConfigError(
             "a second reflected image needs a prism cup (e.g. --cup prism:6): only a prism's "
             f"facets split the reflection into two regions; the scene's cup is a {scene.cup.kind}"
