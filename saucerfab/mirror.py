@@ -20,7 +20,6 @@ and the benchmark call; each hands over to the cup or to
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -28,7 +27,7 @@ import numpy as np
 
 from saucerfab.cups import CircleCup, Cup, EllipseCup, PrismCup
 from saucerfab.errors import ConfigError
-from saucerfab.reflection import MirrorPiece, Reference, circle_quartic, facet_frames, wrap_angle
+from saucerfab.reflection import MirrorPiece, Reference, circle_quartic, facet_frames
 from saucerfab.scene import Scene
 
 
@@ -250,86 +249,3 @@ def visible_region(
         if facets is None or facet in facets:
             region |= ok
     return region.reshape(n, n)
-
-
-def split_reflected_facets(scene: Scene, heights: np.ndarray | None = None) -> list[list[int]]:
-    """Split a prism's seen facets into two groups, one per reflected image.
-
-    The facets the camera sees form a chain around the outline; the split
-    is between two neighbours of that chain (so each image is seen in one
-    connected part of the cup), at the cut where the saucer regions the two
-    groups reflect (in frame, see :func:`visible_region`) overlap least,
-    the more even split on a tie. A sample in both regions would have to
-    show both images, so the overlap is what the designs must compromise on;
-    :func:`facet_groups_overlap` reports it.
-
-    Args:
-        scene: a scene with a prism cup.
-        heights: (N, N) heights (default: a flat saucer at the scene's resolution).
-
-    Returns:
-        ``[first, second]``: facet indices, each group in chain order,
-        the first on the viewer's left.
-
-    Raises:
-        ConfigError: the cup has no facets (not a prism), or fewer than two of its facets
-            reflect any of the saucer.
-    """
-    if not scene.cup.faceted:
-        raise ConfigError(
-            f"only a prism cup's facets split the reflection into two regions; the cup is a "
-            f"{scene.cup.kind} (use e.g. --cup prism:6)"
-        )
-    _, seen = seen_by_piece(scene, None, heights, True)
-    verts, edges, _ = facet_frames(scene.cup.boundary())
-    cam = np.array(scene.camera[:2])
-    # order the chain by the angle of each facet's midpoint around the axis,
-    # measured from the direction of the camera (the seen facets lie within
-    # +-90 degrees of it): seen from the camera, counter-clockwise runs from
-    # the viewer's left to their right
-    mids = verts + 0.5 * edges
-    ref = math.atan2(cam[1], cam[0])
-    ang = {k: float(wrap_angle(np.array(math.atan2(mids[k, 1], mids[k, 0]) - ref))) for k in seen}
-    chain = sorted((k for k in seen if seen[k].any()), key=lambda k: ang[k])
-    if len(chain) < 2:
-        raise ConfigError(
-            f"only {len(chain)} facet(s) of the {len(verts)}-sided prism reflect the saucer "
-            "within the reflected frame; two reflected images need two. Rotate the prism "
-            "(a corner towards the viewer) or widen the reflected view"
-        )
-    best: tuple[int, int, int] | None = None
-    for cut in range(1, len(chain)):
-        a = np.logical_or.reduce([seen[k] for k in chain[:cut]])
-        b = np.logical_or.reduce([seen[k] for k in chain[cut:]])
-        key = (int((a & b).sum()), abs(int(a.sum()) - int(b.sum())), cut)
-        best = key if best is None or key < best else best
-    assert best is not None  # chain has at least two facets
-    return [chain[: best[2]], chain[best[2] :]]
-
-
-def facet_groups_overlap(
-    scene: Scene, groups: list[list[int]], heights: np.ndarray | None = None
-) -> tuple[float, float, float]:
-    """How the saucer regions reflected by facet groups share the saucer.
-
-    Args:
-        scene: a scene with a prism cup.
-        groups: two lists of facet indices (e.g. from :func:`split_reflected_facets`).
-        heights: (N, N) heights (default: a flat saucer at the scene's resolution).
-
-    Returns:
-        (fraction of the saucer samples in the first region, in the second,
-        in both), each in [0, 1].
-    """
-    if len(groups) != 2:
-        raise ConfigError(f"give two facet groups, got {len(groups)}")
-    n, seen = seen_by_piece(scene, None, heights, True)
-    regions = []
-    for g in groups:
-        r = np.zeros(n * n, dtype=bool)
-        for k in g:
-            if k in seen:
-                r |= seen[k]
-        regions.append(r)
-    a, b = regions
-    return float(a.mean()), float(b.mean()), float((a & b).mean())

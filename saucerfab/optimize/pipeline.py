@@ -114,8 +114,7 @@ def prepare(request: DesignRequest) -> Prepared:
     groups: list[list[int]] | None = None
     placement: dict[str, Any] = {}
     if request.reflected2 is not None:
-        from saucerfab.mirror import split_reflected_facets
-        from saucerfab.optimize.regions import best_placement, region_report
+        from saucerfab.optimize.regions import best_placement, region_report, split_reflected_facets
 
         if request.prism_placement == "auto":
             scene, pick, reports = best_placement(scene, base)
