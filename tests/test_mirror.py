@@ -22,7 +22,7 @@ from saucerfab import mirror
 from saucerfab.errors import ConfigError, GeometryError
 from saucerfab.heightfield import base_shape, make_grid, triangulate
 from saucerfab.render.camera import Camera
-from saucerfab.scene import CircleCup, EllipseCup, PrismCup, Saucer, Scene, ViewFrame
+from saucerfab.scene import CircleCup, EllipseCup, PrismCup, Saucer, Scene
 
 CIRCLE = CircleCup(0.4, 1.0)
 ELLIPSE = EllipseCup((0.45, 0.33), 20.0, 1.0)
@@ -497,51 +497,3 @@ def test_ray_trace_above_the_rim_agrees_with_the_validity_mask() -> None:
     assert above.sum() > 100 and (~above).sum() > 100
     margin = np.abs(wall[:, 2] - cup.height) > 1e-9
     np.testing.assert_array_equal(valid[margin], ~above[margin])
-
-
-# --------------------------------------------------------------------------- two reflected images
-
-
-def test_split_reflected_facets_for_two_images() -> None:
-    wide = ViewFrame((0.0, 0.0, 0.1), 15.0, 64)
-    # a corner towards the viewer; the chain wrapping past facet 0; a chain of three
-    for cup in (PrismCup(6, 0.45, 30.0), PrismCup(5, 0.45, -90.0), PrismCup(10, 0.45, 0.0)):
-        scene = scene_with(cup, reflected=wide)
-        heights = base_shape("waves", 24)
-        groups = mirror.split_reflected_facets(scene, heights)
-        assert len(groups) == 2 and all(groups)
-        seen = [pc.facet for pc in mirror.reflect(scene, saucer_xy(scene, 4))]
-        flat = groups[0] + groups[1]
-        assert sorted(flat) == sorted(k for k in seen if mirror.visible_region(scene, None, heights, facets=[k]).any())
-        # the chain runs left to right for the viewer: facet midpoints' image x increases
-        verts, edges, _ = mirror.prism_facets(cup)
-        cam = Camera.from_scene(scene, "reflected")
-        mid_x = [float(cam.project(np.array([*(verts[k] + 0.5 * edges[k]), 0.5]))[0]) for k in flat]
-        assert mid_x == sorted(mid_x)
-        # no other cut of the chain overlaps less (brute force over the cuts)
-        regions = [mirror.visible_region(scene, None, heights, facets=[k]) for k in flat]
-        overlaps = []
-        for cut in range(1, len(flat)):
-            a = np.logical_or.reduce(regions[:cut])
-            b = np.logical_or.reduce(regions[cut:])
-            overlaps.append(int((a & b).sum()))
-        a = np.logical_or.reduce(regions[: len(groups[0])])
-        b = np.logical_or.reduce(regions[len(groups[0]) :])
-        assert int((a & b).sum()) == min(overlaps)
-        if cup.sides == 10:
-            assert len(flat) == 3
-        if cup.sides == 5:
-            assert groups == [[4], [0]]
-        fa, fb, both = mirror.facet_groups_overlap(scene, groups, heights)
-        assert (fa, fb, both) == pytest.approx((a.mean(), b.mean(), (a & b).mean()))
-        assert fa > 0 and fb > 0
-
-
-def test_split_reflected_facets_errors() -> None:
-    with pytest.raises(ConfigError, match="only a prism"):
-        mirror.split_reflected_facets(scene_with(CIRCLE))
-    # a flat facet faces the camera and the paper's narrow frame shows only it
-    with pytest.raises(ConfigError, match="only 1 facet"):
-        mirror.split_reflected_facets(scene_with(PrismCup(6, 0.45, 0.0)))
-    with pytest.raises(ConfigError, match="two facet groups"):
-        mirror.facet_groups_overlap(scene_with(HEXAGON), [[3]])

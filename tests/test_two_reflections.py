@@ -8,13 +8,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy import ndimage
-from test_mirror import WavySaucer, ray_trace
+from test_mirror import CIRCLE, HEXAGON, WavySaucer, ray_trace, saucer_xy, scene_with
 
-from saucerfab.heightfield import make_grid
-from saucerfab.mirror import split_reflected_facets, visible_region
+from saucerfab import mirror
+from saucerfab.errors import ConfigError
+from saucerfab.heightfield import base_shape, make_grid
+from saucerfab.mirror import visible_region
 from saucerfab.optimize.framing import fit_frames
-from saucerfab.optimize.regions import best_placement, placement_options, region_report
-from saucerfab.scene import load_scene
+from saucerfab.optimize.regions import (
+    best_placement,
+    facet_groups_overlap,
+    placement_options,
+    region_report,
+    split_reflected_facets,
+)
+from saucerfab.render.camera import Camera
+from saucerfab.scene import PrismCup, ViewFrame, load_scene
 
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 
@@ -66,6 +75,54 @@ def test_placement_options_and_the_choice() -> None:
     assert name in reports
     assert chosen.cup.rotation_deg == opts[name].rotation_deg
     assert all(reports[name].overlap <= r.overlap + 0.01 for r in reports.values())
+
+
+# --------------------------------------------------------------------------- the facet split (moved from test_mirror.py with the code)
+
+
+def test_split_reflected_facets_for_two_images() -> None:
+    wide = ViewFrame((0.0, 0.0, 0.1), 15.0, 64)
+    # a corner towards the viewer; the chain wrapping past facet 0; a chain of three
+    for cup in (PrismCup(6, 0.45, 30.0), PrismCup(5, 0.45, -90.0), PrismCup(10, 0.45, 0.0)):
+        scene = scene_with(cup, reflected=wide)
+        heights = base_shape("waves", 24)
+        groups = split_reflected_facets(scene, heights)
+        assert len(groups) == 2 and all(groups)
+        seen = [pc.facet for pc in mirror.reflect(scene, saucer_xy(scene, 4))]
+        flat = groups[0] + groups[1]
+        assert sorted(flat) == sorted(k for k in seen if mirror.visible_region(scene, None, heights, facets=[k]).any())
+        # the chain runs left to right for the viewer: facet midpoints' image x increases
+        verts, edges, _ = mirror.prism_facets(cup)
+        cam = Camera.from_scene(scene, "reflected")
+        mid_x = [float(cam.project(np.array([*(verts[k] + 0.5 * edges[k]), 0.5]))[0]) for k in flat]
+        assert mid_x == sorted(mid_x)
+        # no other cut of the chain overlaps less (brute force over the cuts)
+        regions = [mirror.visible_region(scene, None, heights, facets=[k]) for k in flat]
+        overlaps = []
+        for cut in range(1, len(flat)):
+            a = np.logical_or.reduce(regions[:cut])
+            b = np.logical_or.reduce(regions[cut:])
+            overlaps.append(int((a & b).sum()))
+        a = np.logical_or.reduce(regions[: len(groups[0])])
+        b = np.logical_or.reduce(regions[len(groups[0]) :])
+        assert int((a & b).sum()) == min(overlaps)
+        if cup.sides == 10:
+            assert len(flat) == 3
+        if cup.sides == 5:
+            assert groups == [[4], [0]]
+        fa, fb, both = facet_groups_overlap(scene, groups, heights)
+        assert (fa, fb, both) == pytest.approx((a.mean(), b.mean(), (a & b).mean()))
+        assert fa > 0 and fb > 0
+
+
+def test_split_reflected_facets_errors() -> None:
+    with pytest.raises(ConfigError, match="only a prism"):
+        split_reflected_facets(scene_with(CIRCLE))
+    # a flat facet faces the camera and the paper's narrow frame shows only it
+    with pytest.raises(ConfigError, match="only 1 facet"):
+        split_reflected_facets(scene_with(PrismCup(6, 0.45, 0.0)))
+    with pytest.raises(ConfigError, match="two facet groups"):
+        facet_groups_overlap(scene_with(HEXAGON), [[3]])
 
 
 def _fg(img: np.ndarray, bg: np.ndarray) -> np.ndarray:

@@ -10,7 +10,8 @@ the same numbers in metres)::
                "reflected": {...}},
      "cup": {"shape": "circle", "center": [x, y], "bottom_z": z, "height": h, "radius": r}
             | {"shape": "ellipse", ..., "semi_axes": [a, b], "rotation_deg": t}
-            | {"shape": "prism", ..., "sides": n, "circumradius": r, "rotation_deg": t},
+            | {"shape": "prism", ..., "sides": n, "circumradius": r, "rotation_deg": t}
+            (each shape's fields: its ``file_fields``, saucerfab/cups.py),
      "model_to_file": [[s, 0, 0, tx], [0, s, 0, ty], [0, 0, s, tz], [0, 0, 0, 1]]}
 
 ``viewing_angle_deg`` is SoftRas's: tan(angle) = half the frame's width /
@@ -32,7 +33,7 @@ import numpy as np
 
 from saucerfab.fabricate.export_glb import Z_UP_TO_Y_UP
 from saucerfab.fabricate.solid import Solid
-from saucerfab.scene import CircleCup, EllipseCup, Scene
+from saucerfab.scene import Scene
 
 SCHEMA = "saucerfab.scene/1"
 
@@ -65,16 +66,8 @@ def viewing_dict(scene: Scene, model_to_file: np.ndarray) -> dict[str, Any]:
         "center": centre[:2],
         "bottom_z": centre[2],
         "height": _r(cup.height * s),
+        **cup.file_fields(lambda length: _r(length * s)),  # the shape's own fields, lengths in mm
     }
-    if isinstance(cup, CircleCup):
-        cup_d["radius"] = _r(cup.radius * s)
-    elif isinstance(cup, EllipseCup):
-        cup_d["semi_axes"] = [_r(cup.semi_axes[0] * s), _r(cup.semi_axes[1] * s)]
-        cup_d["rotation_deg"] = float(cup.rotation_deg)
-    else:
-        cup_d["sides"] = int(cup.sides)
-        cup_d["circumradius"] = _r(cup.circumradius * s)
-        cup_d["rotation_deg"] = float(cup.rotation_deg)
 
     def view(name: str) -> dict[str, Any]:
         v = getattr(scene, name)

@@ -233,13 +233,12 @@ def _signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
 def _cup_outline_mm(design: Design, mm_per_unit: float) -> np.ndarray:
     """The cup's footprint in model mm, (K, 2), counter-clockwise.
 
-    Circles and ellipses get enough segments that the chord error stays
-    below 5 micrometres, so the clearance is what the user asked for.
+    A smooth outline gets enough segments that the chord error stays below
+    5 micrometres, so the clearance is what the user asked for; a faceted
+    one gives its corners whatever the count.
     """
     cup = design.scene.cup
     r = cup.circumradius * mm_per_unit
-    if cup.kind == "prism":
-        return cup.boundary() * mm_per_unit
     seg = max(64, int(math.ceil(math.pi / math.acos(max(1.0 - 0.005 / r, -1.0)))))
     return cup.boundary(min(seg, 2048)) * mm_per_unit
 

@@ -102,7 +102,7 @@ def prepare(request: DesignRequest) -> Prepared:
     from saucerfab.heightfield import load_shape
 
     scene = build_scene(request)
-    if request.reflected2 is not None and scene.cup.kind != "prism":
+    if request.reflected2 is not None and not scene.cup.faceted:
         raise ConfigError(
             "a second reflected image needs a prism cup (e.g. --cup prism:6): only a prism's "
             f"facets split the reflection into two regions; the scene's cup is a {scene.cup.kind}"
@@ -114,8 +114,7 @@ def prepare(request: DesignRequest) -> Prepared:
     groups: list[list[int]] | None = None
     placement: dict[str, Any] = {}
     if request.reflected2 is not None:
-        from saucerfab.mirror import split_reflected_facets
-        from saucerfab.optimize.regions import best_placement, region_report
+        from saucerfab.optimize.regions import best_placement, region_report, split_reflected_facets
 
         if request.prism_placement == "auto":
             scene, pick, reports = best_placement(scene, base)

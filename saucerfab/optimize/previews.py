@@ -38,7 +38,7 @@ BACKDROP = np.array([0.97, 0.97, 0.97])
 
 def cup_mesh(cup, segments: int = 96) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
     """The cup's mirror wall as a triangle mesh: vertices (2K, 3), faces (2K, 3)."""
-    outline = cup.boundary(segments) if cup.kind != "prism" else cup.boundary()
+    outline = cup.boundary(segments)  # a faceted cup gives its corners
     k = outline.shape[0]
     bottom = np.concatenate([outline, np.zeros((k, 1))], axis=1)
     top = np.concatenate([outline, np.full((k, 1), cup.height)], axis=1)
@@ -55,7 +55,7 @@ def composite_camera(design: Design, size: int) -> Camera:
     (x0, x1), (y0, y1) = scene.saucer.x_range, scene.saucer.y_range
     zmax = float(design.heights.max())
     pts = [[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in (0.0, zmax)]
-    outline = scene.cup.boundary(32) if scene.cup.kind != "prism" else scene.cup.boundary()
+    outline = scene.cup.boundary(32)
     pts += [[p[0], p[1], z] for p in outline for z in (0.0, scene.cup.height)]
     pts = np.asarray(pts)
     target = tuple(pts.mean(axis=0))

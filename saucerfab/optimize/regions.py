@@ -3,10 +3,12 @@
 A regular n-gon prism shows the camera several facets; each is a plane
 mirror that reflects its own part of the saucer. Splitting the visible facets
 into the camera's left and right halves gives two reflected images, each seen
-in its own facet region of the cup. They work only where the saucer regions
-the two groups reflect hardly overlap; the paper names two placements of the
-prism (a vertex towards the viewer, or a facet towards the viewer) and uses
-the better one. :func:`best_placement` measures both and picks it.
+in its own facet region of the cup (:func:`split_reflected_facets` makes the
+split). They work only where the saucer regions the two groups reflect
+hardly overlap (:func:`facet_groups_overlap`); the paper names two
+placements of the prism (a vertex towards the viewer, or a facet towards
+the viewer) and uses the better one. :func:`best_placement` measures both
+and picks it.
 """
 
 from __future__ import annotations
@@ -16,9 +18,94 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from saucerfab.cups import PrismCup
 from saucerfab.errors import ConfigError
-from saucerfab.mirror import facet_groups_overlap, split_reflected_facets
-from saucerfab.scene import PrismCup, Scene
+from saucerfab.mirror import seen_by_piece
+from saucerfab.reflection import facet_frames, wrap_angle
+from saucerfab.scene import Scene
+
+
+def split_reflected_facets(scene: Scene, heights: np.ndarray | None = None) -> list[list[int]]:
+    """Split a prism's seen facets into two groups, one per reflected image.
+
+    The facets the camera sees form a chain around the outline; the split
+    is between two neighbours of that chain (so each image is seen in one
+    connected part of the cup), at the cut where the saucer regions the two
+    groups reflect (in frame, see :func:`saucerfab.mirror.visible_region`) overlap least,
+    the more even split on a tie. A sample in both regions would have to
+    show both images, so the overlap is what the designs must compromise on;
+    :func:`facet_groups_overlap` reports it.
+
+    Args:
+        scene: a scene with a prism cup.
+        heights: (N, N) heights (default: a flat saucer at the scene's resolution).
+
+    Returns:
+        ``[first, second]``: facet indices, each group in chain order,
+        the first on the viewer's left.
+
+    Raises:
+        ConfigError: the cup has no facets (not a prism), or fewer than two of its facets
+            reflect any of the saucer.
+    """
+    if not scene.cup.faceted:
+        raise ConfigError(
+            f"only a prism cup's facets split the reflection into two regions; the cup is a "
+            f"{scene.cup.kind} (use e.g. --cup prism:6)"
+        )
+    _, seen = seen_by_piece(scene, None, heights, True)
+    verts, edges, _ = facet_frames(scene.cup.boundary())
+    cam = np.array(scene.camera[:2])
+    # order the chain by the angle of each facet's midpoint around the axis,
+    # measured from the direction of the camera (the seen facets lie within
+    # +-90 degrees of it): seen from the camera, counter-clockwise runs from
+    # the viewer's left to their right
+    mids = verts + 0.5 * edges
+    ref = math.atan2(cam[1], cam[0])
+    ang = {k: float(wrap_angle(np.array(math.atan2(mids[k, 1], mids[k, 0]) - ref))) for k in seen}
+    chain = sorted((k for k in seen if seen[k].any()), key=lambda k: ang[k])
+    if len(chain) < 2:
+        raise ConfigError(
+            f"only {len(chain)} facet(s) of the {len(verts)}-sided prism reflect the saucer "
+            "within the reflected frame; two reflected images need two. Rotate the prism "
+            "(a corner towards the viewer) or widen the reflected view"
+        )
+    best: tuple[int, int, int] | None = None
+    for cut in range(1, len(chain)):
+        a = np.logical_or.reduce([seen[k] for k in chain[:cut]])
+        b = np.logical_or.reduce([seen[k] for k in chain[cut:]])
+        key = (int((a & b).sum()), abs(int(a.sum()) - int(b.sum())), cut)
+        best = key if best is None or key < best else best
+    assert best is not None  # chain has at least two facets
+    return [chain[: best[2]], chain[best[2] :]]
+
+
+def facet_groups_overlap(
+    scene: Scene, groups: list[list[int]], heights: np.ndarray | None = None
+) -> tuple[float, float, float]:
+    """How the saucer regions reflected by facet groups share the saucer.
+
+    Args:
+        scene: a scene with a prism cup.
+        groups: two lists of facet indices (e.g. from :func:`split_reflected_facets`).
+        heights: (N, N) heights (default: a flat saucer at the scene's resolution).
+
+    Returns:
+        (fraction of the saucer samples in the first region, in the second,
+        in both), each in [0, 1].
+    """
+    if len(groups) != 2:
+        raise ConfigError(f"give two facet groups, got {len(groups)}")
+    n, seen = seen_by_piece(scene, None, heights, True)
+    regions = []
+    for g in groups:
+        r = np.zeros(n * n, dtype=bool)
+        for k in g:
+            if k in seen:
+                r |= seen[k]
+        regions.append(r)
+    a, b = regions
+    return float(a.mean()), float(b.mean()), float((a & b).mean())
 
 
 @dataclass(frozen=True)
@@ -44,7 +131,7 @@ class RegionReport:
 
 
 def region_report(scene: Scene, heights: np.ndarray | None = None) -> RegionReport:
-    """The facet split of :func:`saucerfab.mirror.split_reflected_facets` and its overlap."""
+    """The facet split of :func:`split_reflected_facets` and its overlap."""
     groups = split_reflected_facets(scene, heights)
     a, b, both = facet_groups_overlap(scene, groups, heights)
     smaller = max(min(a, b), 1e-12)
@@ -58,6 +145,7 @@ def placement_options(scene: Scene) -> dict[str, PrismCup]:
     ``facet_to_viewer``: a facet squarely faces the camera.
     """
     cup = scene.cup
+    # the two placements turn a regular n-gon about its axis: a prism's own parameters
     if not isinstance(cup, PrismCup):
         raise ConfigError(f"placement options exist for prism cups only; got a {cup.kind} cup")
     towards = math.degrees(math.atan2(scene.camera[1], scene.camera[0]))
