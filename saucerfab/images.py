@@ -62,6 +62,8 @@ from typing import Literal
 import numpy as np
 
 from saucerfab.errors import ConfigError, ImageError, MaskError
+from saucerfab.fileio import sha256_file
+from saucerfab.imageio import PixelLimitError, open_bounded
 
 #: default limits for untrusted images (checked before decoding)
 DEFAULT_MAX_PIXELS = 64_000_000
@@ -407,20 +409,13 @@ def load_image(
     notes: list[str] = []
     w = h = 0
     try:
-        # Image.open reads only the header; `formats` keeps Pillow from
-        # trying the dozens of other (less hardened) decoders on it.
-        with Image.open(p, formats=list(ACCEPTED_FORMATS)) as im:
+        with open_bounded(p, ACCEPTED_FORMATS, max_pixels) as im:
             fmt = str(im.format)
             if fmt not in _DECODED_FORMATS:  # defensive: a plugin returned something else
                 raise ImageError(f"image {name!r} is {fmt}; saucerfab reads PNG, JPEG and WebP")
             w, h = im.size
             if w <= 0 or h <= 0:
                 raise ImageError(f"image {name!r} has no pixels ({w}x{h})")
-            if w * h > max_pixels:
-                raise ImageError(
-                    f"image {name!r} is {w}x{h} = {w * h:,} pixels; the limit is {max_pixels:,}. "
-                    "Downscale it first (a view frame is a few hundred pixels wide)."
-                )
             mode = im.mode
             png_depth = _png_bit_depth(head)
             if mode == "1":
@@ -446,6 +441,11 @@ def load_image(
                     work = turned
                     notes.append(f"EXIF orientation {orientation} applied")
             rgb, alpha = _decode(work, notes)
+    except PixelLimitError as exc:
+        raise ImageError(
+            f"image {name!r} is {exc.width}x{exc.height} = {exc.width * exc.height:,} pixels; "
+            f"the limit is {max_pixels:,}. Downscale it first (a view frame is a few hundred pixels wide)."
+        ) from None
     except ImageError as exc:
         msg = str(exc)
         if name not in msg:
@@ -890,8 +890,6 @@ def prepare_image(
     Raises:
         ImageError: as those functions do; nothing is written anywhere.
     """
-    from saucerfab.design import sha256_file
-
     img = loaded if loaded is not None else load_image(path, max_pixels=max_pixels, max_bytes=max_bytes)
     bg = estimate_background(img.rgb, img.alpha) if background is None else parse_colour(background)
     rgb, alpha, fill = fit_square(img, size, background=bg, fit=fit)

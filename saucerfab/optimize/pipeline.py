@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 
 from saucerfab import __version__
-from saucerfab.design import Design, save_design, sha256_file
+from saucerfab.design import Design, save_design
 from saucerfab.errors import ConfigError, Interrupted, MaskError, OutputError
-from saucerfab.fileio import write_bytes_atomic
+from saucerfab.fileio import sha256_file, write_bytes_atomic
 from saucerfab.optimize.printable import PrintTarget, preflight, print_target
 from saucerfab.optimize.request import DesignRequest
 from saucerfab.optimize.stages import ABLATION_STAGES, SIGMA_LARGE, WEIGHT_FACTORS, StageSpec, without_enhancement
