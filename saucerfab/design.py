@@ -45,6 +45,7 @@ from saucerfab import __version__
 from saucerfab.errors import DesignError, SaucerfabError
 from saucerfab.fileio import atomic_dir
 from saucerfab.heightfield import make_grid, triangulate
+from saucerfab.imageio import PixelLimitError, npy_header, open_bounded, png_bytes
 from saucerfab.scene import Scene, scene_from_dict, scene_to_dict
 
 SCHEMA = "saucerfab.design/1"
@@ -125,26 +126,9 @@ def reference_name(view: str) -> str:
     return f"reference_{view}.png"
 
 
-def sha256_file(path: str | os.PathLike[str]) -> str:
-    """Hex sha256 of a file's bytes (streamed)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def _npy_bytes(a: np.ndarray) -> bytes:
     buf = io.BytesIO()
     np.save(buf, a, allow_pickle=False)
-    return buf.getvalue()
-
-
-def _png_bytes(rgb: np.ndarray) -> bytes:
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(rgb).save(buf, format="PNG", optimize=False, compress_level=6)
     return buf.getvalue()
 
 
@@ -193,12 +177,12 @@ def save_design(
     files = {
         "heights.npy": _npy_bytes(np.asarray(design.heights, np.float64)),
         "base_heights.npy": _npy_bytes(np.asarray(design.base_heights, np.float64)),
-        "texture.png": _png_bytes(np.ascontiguousarray(design.texture)),
+        "texture.png": png_bytes(design.texture),
         "face_uvs.npy": _npy_bytes(np.asarray(design.face_uvs, np.float32)),
         "face_view.npy": _npy_bytes(np.asarray(design.face_view, np.uint8)),
     }
     for view, img in sorted(design.references.items()):
-        files[reference_name(view)] = _png_bytes(np.ascontiguousarray(img, np.uint8))
+        files[reference_name(view)] = png_bytes(img)
     for name, data in (previews or {}).items():
         files[f"previews/{name}"] = data
     files.update(extra_files or {})
@@ -218,16 +202,9 @@ def save_design(
 
 
 def _load_npy(path: Path, max_elems: int) -> np.ndarray:
+    """A design's numeric array, refused from its header when over ``max_elems`` values."""
     try:
-        with open(path, "rb") as fh:
-            version = np.lib.format.read_magic(fh)
-            # public readers only: numpy 2.x moved the private _read_array_header
-            read = (
-                np.lib.format.read_array_header_1_0
-                if version == (1, 0)
-                else np.lib.format.read_array_header_2_0
-            )
-            shape, _, dtype = read(fh)
+        shape, dtype = npy_header(path)
         if int(np.prod(shape)) > max_elems:
             raise DesignError(f"{path} holds {shape}; larger than any design saucerfab makes")
         if dtype.kind not in "biuf":  # the callers convert to float/uint8
@@ -242,10 +219,10 @@ def _load_png(path: Path) -> np.ndarray:
     from PIL import Image
 
     try:
-        with Image.open(path) as im:
-            if im.width * im.height > MAX_TEXTURE_PIXELS:
-                raise DesignError(f"{path.name} is {im.width}x{im.height}, over the limit")
+        with open_bounded(path, ("PNG",), MAX_TEXTURE_PIXELS) as im:
             return np.asarray(im.convert("RGB"), dtype=np.uint8)
+    except PixelLimitError as exc:
+        raise DesignError(f"{path.name} is {exc.width}x{exc.height}, over the limit") from None
     except (OSError, Image.DecompressionBombError) as exc:
         raise DesignError(f"cannot read {path}: {exc}") from None
 

@@ -1,4 +1,4 @@
-"""Atomic file and folder writes: the one place saucerfab writes output.
+"""Atomic file and folder writes (the one place saucerfab writes output), hashing, the umask.
 
 Outputs are written under a temporary name in the destination folder and
 renamed into place once complete, so a crash or Ctrl-C never leaves a
@@ -13,17 +13,42 @@ two exports into one folder) from interleaving: the second fails at once.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import shutil
 import tempfile
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+_UMASK: int | None = None
+_UMASK_LOCK = threading.Lock()
+
+
+def umask() -> int:
+    """This process's umask (read once, then remembered).
+
+    POSIX can read the umask only by setting it; while it is set another
+    thread (a batch runs jobs in threads) could create a file with the
+    temporary value, so it is read once, with the common 022 as that value.
+    saucerfab never changes its umask.
+    """
+    global _UMASK
+    with _UMASK_LOCK:
+        if _UMASK is None:
+            _UMASK = os.umask(0o022)
+            os.umask(_UMASK)
+        return _UMASK
+
+
+def sha256_file(path: str | os.PathLike[str]) -> str:
+    """Hex sha256 of a file's bytes (streamed in 1 MiB pieces)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
 
 
 def _public(path: str | os.PathLike[str], *, folder: bool) -> None:
@@ -32,7 +57,7 @@ def _public(path: str | os.PathLike[str], *, folder: bool) -> None:
     mkstemp and mkdtemp create private (0600 / 0700) entries; an output a
     user or a print bureau's other accounts should read follows the umask.
     """
-    os.chmod(path, (0o777 if folder else 0o666) & ~_umask())
+    os.chmod(path, (0o777 if folder else 0o666) & ~umask())
 
 
 def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> Path:

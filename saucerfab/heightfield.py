@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from saucerfab.errors import ShapeError
+from saucerfab.imageio import PixelLimitError, npy_header, open_bounded
 from saucerfab.scene import Saucer
 
 #: the largest shape file we parse (pixels of a PNG / elements of a .npy)
@@ -168,31 +169,27 @@ def resample(heights: np.ndarray, n: int) -> np.ndarray:
 
 
 def _load_png(path: Path) -> np.ndarray:
+    """(H, W) float64 heights in [0, 1] of an 8/16-bit PNG (white = 1), row 0 at the near edge (smallest y)."""
     from PIL import Image
 
-    # Image.open reads only the header, so the size check below runs before
-    # any pixel is decoded (Pillow's global bomb limit is left as it is).
     try:
-        with Image.open(path) as im:
-            if im.width * im.height > MAX_SHAPE_PIXELS:
-                raise ShapeError(
-                    f"shape image {str(path)!r} is {im.width}x{im.height}; the limit is "
-                    f"{MAX_SHAPE_PIXELS} pixels. Downscale it first."
-                )
+        with open_bounded(path, ("PNG",), MAX_SHAPE_PIXELS) as im:
             mode = im.mode
             if mode in ("I;16", "I;16B", "I;16L", "I"):
                 arr = np.asarray(im, dtype=np.float64)
                 full = 65535.0
             elif mode in ("L", "LA", "P", "RGB", "RGBA", "1"):
-                if mode not in ("L", "1"):
-                    arr = np.asarray(im.convert("L"), dtype=np.float64)
-                else:
-                    arr = np.asarray(im.convert("L"), dtype=np.float64)
+                arr = np.asarray(im.convert("L"), dtype=np.float64)
                 full = 255.0
             else:
                 raise ShapeError(
                     f"shape image {str(path)!r} has mode {mode}; use 8- or 16-bit grayscale PNG"
                 )
+    except PixelLimitError as exc:
+        raise ShapeError(
+            f"shape image {str(path)!r} is {exc.width}x{exc.height}; the limit is "
+            f"{MAX_SHAPE_PIXELS} pixels. Downscale it first."
+        ) from None
     except (OSError, Image.DecompressionBombError, SyntaxError) as exc:
         raise ShapeError(f"cannot read shape image {str(path)!r}: {exc}") from None
     # Image rows run top to bottom; our rows run along +y. Row 0 of the image
@@ -201,16 +198,9 @@ def _load_png(path: Path) -> np.ndarray:
 
 
 def _load_npy(path: Path) -> np.ndarray:
+    """(H, W) float64 values of a 2-D numeric ``.npy`` file, its size checked from the header."""
     try:
-        with open(path, "rb") as fh:
-            version = np.lib.format.read_magic(fh)
-            # public readers only: numpy 2.x moved the private _read_array_header
-            read = (
-                np.lib.format.read_array_header_1_0
-                if version == (1, 0)
-                else np.lib.format.read_array_header_2_0
-            )
-            shape, _, dtype = read(fh)
+        shape, dtype = npy_header(path)
     except (ValueError, OSError) as exc:
         raise ShapeError(f"{str(path)!r} is not a valid .npy file: {exc}") from None
     if len(shape) != 2:

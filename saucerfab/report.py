@@ -23,6 +23,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from saucerfab.imageio import png_bytes
+
 #: energy series drawn by :func:`energy_plot`, with their colours
 ENERGY_KEYS = (
     ("E_total", "black"),
@@ -74,11 +76,7 @@ def as_uint8_rgb(image: np.ndarray) -> np.ndarray:
 
 def to_png_bytes(image: np.ndarray) -> bytes:
     """PNG file bytes of ``image`` (anything :func:`as_uint8_rgb` takes), 8-bit RGB."""
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(as_uint8_rgb(image)).save(buf, format="PNG", compress_level=6)
-    return buf.getvalue()
+    return png_bytes(as_uint8_rgb(image))
 
 
 def _render_figure(fig) -> np.ndarray:  # type: ignore[no-untyped-def]

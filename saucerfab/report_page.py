@@ -18,7 +18,6 @@ the model inline, so the page opens from disk with no network access.
 
 from __future__ import annotations
 
-import io
 import json
 from collections.abc import Mapping
 from pathlib import Path
@@ -26,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from saucerfab.imageio import png_bytes
 from saucerfab.report import Section, html_report
 
 if TYPE_CHECKING:
@@ -41,14 +41,13 @@ _MAX_PICTURE_BYTES = 16 << 20
 
 
 def _png(rgb: np.ndarray, max_px: int | None = None) -> bytes:
+    """PNG bytes of an (H, W, 3) uint8 picture, resized to ``max_px`` square when larger."""
     from PIL import Image
 
-    im = Image.fromarray(np.ascontiguousarray(rgb, np.uint8))
-    if max_px is not None and max(im.size) > max_px:
-        im = im.resize((max_px, max_px), Image.Resampling.LANCZOS)
-    buf = io.BytesIO()
-    im.save(buf, format="PNG", compress_level=6)
-    return buf.getvalue()
+    rgb = np.ascontiguousarray(rgb, np.uint8)
+    if max_px is not None and max(rgb.shape[:2]) > max_px:
+        rgb = np.asarray(Image.fromarray(rgb).resize((max_px, max_px), Image.Resampling.LANCZOS))
+    return png_bytes(rgb)
 
 
 def _read(path: Path, cap: int) -> bytes | None:

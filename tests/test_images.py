@@ -1,4 +1,4 @@
-"""Tests of saucerfab.images: loading every mode, limits, fitting, masks, enhancement, samples."""
+"""Tests of saucerfab.images and saucerfab.masks: loading every mode, limits, fitting, masks, samples."""
 
 from __future__ import annotations
 
@@ -14,22 +14,16 @@ from PIL import Image, ImageCms
 
 from saucerfab.errors import ConfigError, ImageError
 from saucerfab.images import (
-    LIGHT_BLUE,
     LoadedImage,
     ViewImage,
-    black_white_targets,
     estimate_background,
     fit_box,
     fit_square,
     flatten_alpha,
-    foreground_mask,
     load_image,
-    otsu_threshold,
     parse_colour,
-    prepare_image,
-    solid_colour_targets,
-    threshold_mask,
 )
+from saucerfab.masks import foreground_mask, otsu_threshold, prepare_image, threshold_mask
 
 SAMPLES = Path(__file__).resolve().parent.parent / "samples"
 
@@ -580,37 +574,6 @@ def test_view_image_flattened():
     flat = v.flattened()
     assert flat[0, 0].tolist() == [1, 1, 1] and flat[1, 1].tolist() == [0, 0, 0]
     assert v.flattened("#0000ff")[0, 0].tolist() == [0, 0, 1]
-
-
-# --------------------------------------------------------------------------- enhancement
-
-
-def test_black_white_targets_are_the_papers_colours():
-    dm = np.zeros((6, 8), bool)
-    dm[1:3, 2:5] = True
-    rm = np.zeros((5, 5), bool)
-    rm[0, 0] = True
-    de, re_ = black_white_targets(dm, rm)
-    assert de.shape == (6, 8, 3) and re_.shape == (5, 5, 3) and de.dtype == np.float32
-    assert LIGHT_BLUE == (0.0, 0.5, 1.0)
-    assert (de[dm] == [0.0, 0.0, 0.0]).all() and (de[~dm] == [0.0, 0.5, 1.0]).all()
-    assert (re_[rm] == [1.0, 1.0, 1.0]).all() and (re_[~rm] == [0.0, 0.5, 1.0]).all()
-
-
-def test_solid_colour_targets():
-    masks = [np.eye(4, dtype=bool), np.fliplr(np.eye(4, dtype=bool)), np.zeros((4, 4), bool)]
-    masks[2][0, 1] = True
-    out = solid_colour_targets(masks)
-    assert len(out) == 3
-    for m, img, c in zip(masks, out, ([1, 0, 0], [0, 1, 0], [0, 0, 1])):
-        assert (img[m] == c).all() and (img[~m] == [1, 1, 1]).all()
-    with pytest.raises(ValueError):
-        solid_colour_targets(masks + [masks[0]])
-
-
-def test_soft_masks_blend():
-    de, _ = black_white_targets(np.full((2, 2), 0.5), np.zeros((2, 2), bool))
-    np.testing.assert_allclose(de[0, 0], [0.0, 0.25, 0.5])
 
 
 # --------------------------------------------------------------------------- samples

@@ -255,7 +255,7 @@ def test_photographs_without_a_subject_are_designed_without_enhancement(tmp_path
 
 
 def test_a_photo_with_a_threshold_mask_but_no_plain_background_is_not_enhanced(tmp_path) -> None:  # noqa: ANN001
-    from saucerfab import images as im
+    from saucerfab import masks as im
 
     rocket = im.prepare_image(SAMPLES / "photos" / "rocket.jpg", 96)
     heart = im.prepare_image(SAMPLES / "direct_heart.png", 96)

@@ -131,7 +131,7 @@ def _fg(img: np.ndarray, bg: np.ndarray) -> np.ndarray:
 
 def test_two_reflection_design_shows_three_recognisable_views(tmp_path) -> None:  # noqa: ANN001
     from saucerfab.design import load_design
-    from saucerfab.images import prepare_image
+    from saucerfab.masks import prepare_image
     from saucerfab.optimize.pipeline import run_design
     from saucerfab.optimize.request import DesignRequest
 

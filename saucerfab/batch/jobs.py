@@ -41,7 +41,7 @@ from typing import Any
 from saucerfab import __version__
 from saucerfab.batch.manifest import JobSpec
 from saucerfab.errors import InputFileError, Interrupted, SaucerfabError
-from saucerfab.fileio import atomic_dir
+from saucerfab.fileio import atomic_dir, sha256_file
 
 MARKER = "job.json"
 MARKER_SCHEMA = "saucerfab.batch-job/1"
@@ -578,20 +578,7 @@ def commit(result: JobResult, out_root: Path) -> Path:
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
-        os.chmod(tmp, 0o777 & ~umask())  # the temporary folder is private (0700); the result is not
     return dest
-
-
-_UMASK: int | None = None
-
-
-def umask() -> int:
-    """This process's umask (read once)."""
-    global _UMASK
-    if _UMASK is None:
-        _UMASK = os.umask(0o022)
-        os.umask(_UMASK)
-    return _UMASK
 
 
 def read_marker(folder: Path) -> dict[str, Any] | None:
@@ -616,8 +603,6 @@ def completed(out_root: Path, job_id: str, key: str) -> dict[str, Any] | None:
     listed = marker.get("files")
     if not isinstance(listed, dict):
         return None
-    from saucerfab.design import sha256_file
-
     for rel, digest in listed.items():
         p = folder / rel
         if not p.is_file() or sha256_file(p) != digest:

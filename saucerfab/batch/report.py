@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import html
 import json
-import os
 import sys
 import time
 from dataclasses import asdict, dataclass, field
@@ -214,12 +213,10 @@ def report_html(data: dict[str, Any]) -> str:
 
 
 def write_reports(data: dict[str, Any], out: Path) -> None:
-    """Write ``batch-report.json`` and ``batch-report.html`` into ``out`` atomically."""
-    from saucerfab.batch.jobs import umask
-
+    """Write ``batch-report.json`` and ``batch-report.html`` into ``out`` atomically
+    (with the usual file mode: umask applies)."""
     for name, text in ((JSON_NAME, json.dumps(data, indent=2) + "\n"), (HTML_NAME, report_html(data))):
-        path = write_text_atomic(out / name, text)
-        os.chmod(path, 0o666 & ~umask())  # atomic writes make private (0600) files
+        write_text_atomic(out / name, text)
 
 
 # --------------------------------------------------------------------------- terminal

@@ -29,10 +29,9 @@ on the sRGB values, as every viewer and printer driver samples textures.
 
 from __future__ import annotations
 
-import io
-
 import numpy as np
 
+from saucerfab import imageio
 from saucerfab.design import Design, FaceView
 from saucerfab.fabricate.atlas import AtlasLayout, UVMap
 from saucerfab.fabricate.solid import Solid
@@ -437,16 +436,11 @@ def vertex_colors(solid: Solid, uvmap: UVMap, page: np.ndarray, layout: AtlasLay
     return out
 
 
-def png_bytes(rgb: np.ndarray, compress_level: int = 1) -> bytes:
-    """PNG bytes of an (H, W, 3) uint8 sRGB image (no timestamps, reproducible).
+#: zlib level of the print files' PNGs: 1 is ~4x faster than the default 6 on
+#: a 4096 px atlas for ~20 % more bytes; the atlas is written once per format
+ATLAS_PNG_LEVEL = 1
 
-    Level 1 is ~4x faster than the default 6 on a 4096 px atlas for ~20 %
-    more bytes; the atlas is written once per format that carries it.
-    """
-    from PIL import Image
 
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(rgb, np.uint8), mode="RGB").save(
-        buf, format="PNG", compress_level=compress_level
-    )
-    return buf.getvalue()
+def png_bytes(rgb: np.ndarray, compress_level: int = ATLAS_PNG_LEVEL) -> bytes:
+    """PNG bytes of an (H, W, 3) uint8 sRGB image (no timestamps, reproducible)."""
+    return imageio.png_bytes(rgb, compress_level)

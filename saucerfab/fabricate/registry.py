@@ -132,11 +132,7 @@ def write_folder(out: str | os.PathLike[str], files: Mapping[str, bytes]) -> Pat
                 "choose a new or empty folder"
             )
     try:
-        with atomic_dir(path) as tmp:
-            # mkdtemp makes the folder owner-only; give it the usual mode (umask applies)
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(tmp, 0o777 & ~umask)
+        with atomic_dir(path) as tmp:  # which gives the folder the usual mode (umask applies)
             for name, data in files.items():
                 if "/" in name or "\\" in name or name.startswith("."):
                     raise ExportError(f"internal error: bad output file name {name!r}")

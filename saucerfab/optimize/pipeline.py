@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 
 from saucerfab import __version__
-from saucerfab.design import Design, save_design, sha256_file
+from saucerfab.design import Design, save_design
 from saucerfab.errors import ConfigError, Interrupted, MaskError, OutputError
-from saucerfab.fileio import write_bytes_atomic
+from saucerfab.fileio import sha256_file, write_bytes_atomic
 from saucerfab.optimize.printable import PrintTarget, preflight, print_target
 from saucerfab.optimize.request import DesignRequest
 from saucerfab.optimize.stages import ABLATION_STAGES, SIGMA_LARGE, WEIGHT_FACTORS, StageSpec, without_enhancement
@@ -100,6 +100,8 @@ def prepare(request: DesignRequest) -> Prepared:
     """Read and validate every input; raise a SaucerfabError before any work."""
     from saucerfab import images as im
     from saucerfab.heightfield import load_shape
+    from saucerfab.masks import PLAIN_SHARE, plain_background_share, prepare_image
+    from saucerfab.optimize.enhancement import black_white_targets, solid_colour_targets
 
     scene = build_scene(request)
     if request.reflected2 is not None and not scene.cup.faceted:
@@ -146,21 +148,21 @@ def prepare(request: DesignRequest) -> Prepared:
         fname = Path(path).name
         fitting = {"fit": fits[name], "background": request.background}
         if request.enhancement == "none" and request.ablation == "full":
-            view = im.prepare_image(path, s, mask_method="none", loaded=loaded, **fitting)
+            view = prepare_image(path, s, mask_method="none", loaded=loaded, **fitting)
         else:
             try:
-                view = im.prepare_image(path, s, mask_path=mask_paths[name], loaded=loaded, **fitting)
+                view = prepare_image(path, s, mask_path=mask_paths[name], loaded=loaded, **fitting)
             except MaskError as exc:
                 if request.enhancement == "subject" or request.ablation != "full":
                     raise
                 # the reason without the machine's path to the file (design folders are reproducible)
                 why = str(exc).split(". Give")[0].replace(repr(str(path)), repr(fname))
                 problems.append(f"{name} picture: {why}")
-                view = im.prepare_image(path, s, mask_method="none", loaded=loaded, **fitting)
+                view = prepare_image(path, s, mask_method="none", loaded=loaded, **fitting)
             else:
                 if view.mask_source == "threshold":
-                    plain = im.plain_background_share(view)
-                    if plain < im.PLAIN_SHARE:
+                    plain = plain_background_share(view)
+                    if plain < PLAIN_SHARE:
                         problems.append(f"{name} picture {fname!r}: no plain background around a subject "
                                         f"({plain:.0%} of it is near its border colour)")
         render[name] = view.flattened()
@@ -181,10 +183,10 @@ def prepare(request: DesignRequest) -> Prepared:
     if enhancement["strategy"] == "none":
         enhanced = {k: v.copy() for k, v in render.items()}  # no enhanced targets: the pictures themselves
     elif len(names) == 2:
-        e_d, e_r = im.black_white_targets(masks["direct"], masks["reflected"])
+        e_d, e_r = black_white_targets(masks["direct"], masks["reflected"])
         enhanced = {"direct": e_d, "reflected": e_r}
     else:
-        e = im.solid_colour_targets([masks[k] for k in names])
+        e = solid_colour_targets([masks[k] for k in names])
         enhanced = dict(zip(names, e))
     return Prepared(
         scene, base, render, texture, enhanced, masks, inputs, groups, placement or None, enhancement,

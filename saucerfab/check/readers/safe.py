@@ -33,6 +33,7 @@ import numpy as np
 
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import ReadError, TextureInfo
+from saucerfab.imageio import PixelLimitError, open_bounded
 
 #: image formats Pillow may decode for a texture; the ones printer software
 #: takes (PNG, JPEG) and a few that OBJ/VRML files in the wild use
@@ -353,27 +354,28 @@ def probe_texture(name: str, data: bytes | None, limits: Limits, *, decode: bool
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # DecompressionBombWarning: we check pixels ourselves below
-            img = Image.open(io.BytesIO(data), formats=TEXTURE_FORMATS)
-            w, h = img.size
-            info.width, info.height, info.image_format = int(w), int(h), img.format
-            if w <= 0 or h <= 0:
-                info.status, info.message = "unreadable", f"texture {name!r} has no pixels ({w} x {h})"
-                return info
-            if w * h > limits.max_texture_pixels:
-                info.status = "too_large"
-                info.message = (
-                    f"texture {name!r} is {w:,} x {h:,} pixels, over the checker's limit of "
-                    f"{limits.max_texture_pixels:,} pixels (decompression bomb?); not decoded"
-                )
-                return info
-            # charged here for a format header_size does not read (BMP, GIF...)
-            if decode and budget is not None and not charged and (msg := budget.over_pixels(name, w, h)) is not None:
-                info.status, info.message = "too_large", msg
-                return info
-            if decode:
-                img.load()
-                if limits.keep_texture_pixels:
-                    info.pixels = np.asarray(img.convert("RGB"), dtype=np.uint8)
+            with open_bounded(io.BytesIO(data), TEXTURE_FORMATS, limits.max_texture_pixels) as img:
+                w, h = img.size
+                info.width, info.height, info.image_format = int(w), int(h), img.format
+                if w <= 0 or h <= 0:
+                    info.status, info.message = "unreadable", f"texture {name!r} has no pixels ({w} x {h})"
+                    return info
+                # charged here for a format header_size does not read (BMP, GIF...)
+                if (decode and budget is not None and not charged
+                        and (msg := budget.over_pixels(name, w, h)) is not None):
+                    info.status, info.message = "too_large", msg
+                    return info
+                if decode:
+                    img.load()
+                    if limits.keep_texture_pixels:
+                        info.pixels = np.asarray(img.convert("RGB"), dtype=np.uint8)
+    except PixelLimitError as exc:
+        info.width, info.height, info.image_format = exc.width, exc.height, exc.format
+        info.status = "too_large"
+        info.message = (
+            f"texture {name!r} is {exc.width:,} x {exc.height:,} pixels, over the checker's limit of "
+            f"{limits.max_texture_pixels:,} pixels (decompression bomb?); not decoded"
+        )
     except Image.DecompressionBombError as exc:
         info.status, info.message = "too_large", f"texture {name!r}: {exc}"
     except UnidentifiedImageError:

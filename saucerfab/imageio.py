@@ -1,0 +1,109 @@
+"""Image and array files: a bounded image open, PNG bytes, the ``.npy`` header.
+
+The small helpers every reader and writer of pictures and arrays shares:
+
+* :func:`open_bounded` opens an image from a list of formats and refuses one
+  whose header claims more pixels than a limit, before any pixel is decoded;
+* :func:`png_bytes` encodes saucerfab's PNGs (one set of encoder options, so
+  a design folder or an export is byte-for-byte reproducible);
+* :func:`npy_header` reads an ``.npy`` file's shape and dtype without its data.
+
+Import-light on purpose (numpy here, Pillow inside the functions):
+``saucerfab check`` uses it and must not import torch.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+from collections.abc import Iterator, Sequence
+from typing import IO, TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from PIL import Image
+
+#: zlib level of saucerfab's PNGs (Pillow's default); the print atlas uses a
+#: faster one (:data:`saucerfab.fabricate.bake.ATLAS_PNG_LEVEL`)
+PNG_COMPRESS_LEVEL = 6
+
+
+class PixelLimitError(Exception):
+    """An image's header claims more pixels than its reader's limit.
+
+    Raised by :func:`open_bounded` before any pixel is decoded; every caller
+    catches it and words the refusal for its own users.
+
+    Attributes:
+        format: Pillow's format name of the image ("PNG", "JPEG"...).
+        width, height: the size its header claims, pixels.
+        limit: the largest ``width * height`` the caller accepts.
+    """
+
+    def __init__(self, format: str, width: int, height: int, limit: int) -> None:
+        super().__init__(f"{format} image of {width}x{height} pixels is over the limit of {limit:,} pixels")
+        self.format, self.width, self.height, self.limit = format, width, height, limit
+
+
+@contextlib.contextmanager
+def open_bounded(
+    source: str | os.PathLike[str] | IO[bytes], formats: Sequence[str], max_pixels: int
+) -> Iterator[Image.Image]:
+    """Open an image (header only) for a ``with`` block, its pixel count bounded.
+
+    ``Image.open`` reads only the header, so the size check runs before any
+    pixel is decoded; ``formats`` keeps Pillow from trying its dozens of
+    other (less hardened) decoders on the bytes. Pillow's global
+    decompression-bomb guard is left as it is and still applies.
+
+    Args:
+        source: a path or a binary file object.
+        formats: Pillow format names accepted, e.g. ``("PNG",)``.
+        max_pixels: the largest width x height accepted.
+    Yields:
+        the opened ``PIL.Image.Image`` (closed when the block ends).
+    Raises:
+        PixelLimitError: width x height is over ``max_pixels``.
+        PIL.UnidentifiedImageError (an OSError): not one of ``formats``.
+        OSError, PIL.Image.DecompressionBombError, ...: as ``Image.open`` raises.
+    """
+    from PIL import Image
+
+    with Image.open(source, formats=list(formats)) as im:
+        if im.width * im.height > max_pixels:
+            raise PixelLimitError(str(im.format), im.width, im.height, max_pixels)
+        yield im
+
+
+def png_bytes(rgb: np.ndarray, compress_level: int = PNG_COMPRESS_LEVEL) -> bytes:
+    """PNG file bytes of an image (no timestamps: the same pixels give the same bytes).
+
+    Args:
+        rgb: (H, W, 3) sRGB (or (H, W) grey) values, converted to uint8.
+        compress_level: zlib level 0-9 (no ``optimize`` pass, which would
+            override it).
+    """
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(rgb, np.uint8)).save(buf, format="PNG", compress_level=compress_level)
+    return buf.getvalue()
+
+
+def npy_header(path: str | os.PathLike[str]) -> tuple[tuple[int, ...], np.dtype]:
+    """(shape, dtype) of an ``.npy`` file, read from its header alone (no data loaded).
+
+    Lets a reader refuse a huge or non-numeric array before ``np.load``.
+
+    Raises:
+        OSError: the file cannot be read.
+        ValueError: not an ``.npy`` file, or a damaged header.
+    """
+    with open(path, "rb") as fh:
+        version = np.lib.format.read_magic(fh)
+        # public readers only: numpy 2.x moved the private _read_array_header
+        read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, _, dtype = read(fh)
+    return shape, dtype
