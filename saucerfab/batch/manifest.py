@@ -116,7 +116,7 @@ def design_option_keys() -> frozenset[str]:
 
     # printer and cup_diameter_mm are the job's own keys: the design is made for the
     # printer and size the job exports for (saucerfab.optimize.printable)
-    taken = {*IMAGE_KEYS, "shape", "scene", "cup", "extra", "printer", "cup_diameter_mm"}
+    taken = {*IMAGE_KEYS, "shape", "scene", "cup", "printer", "cup_diameter_mm"}
     return frozenset(f.name for f in fields(DesignRequest) if f.init and f.name not in taken)
 
 
@@ -395,7 +395,7 @@ def _check_design_options(
     The rules are the CLI's own, not copies: the option types are the
     :class:`DesignRequest` field annotations (argparse's ``type=`` on the
     command line), the value checks are ``DesignRequest``'s and
-    ``check_weights``' (a weight the ablation does not use), and the
+    :func:`~saucerfab.optimize.stages.check_weights`' (a weight the ablation does not use), and the
     resolution and image-size ranges are those of the scene the run builds
     (:func:`~saucerfab.optimize.pipeline.build_scene`, as the design's
     ``prepare`` does). A job with a scene *file* has its overrides checked on
@@ -403,11 +403,11 @@ def _check_design_options(
     its cup with the scene file when the job runs: the file is the job's
     input, read when the job runs, not when the manifest loads.
     """
-    import argparse
-
     from saucerfab.errors import SaucerfabError
     from saucerfab.heightfield import check_height_scale
+    from saucerfab.optimize.energies import WEIGHTS
     from saucerfab.optimize.request import DesignRequest
+    from saucerfab.optimize.stages import check_weights
 
     hints = _request_hints()
     for name, value in sorted(options.items()):
@@ -416,11 +416,7 @@ def _check_design_options(
             raise ConfigError(f"{where} design_options: {name} must be {want}, got {value!r}")
     try:
         request = DesignRequest(direct=files["direct"], reflected=files["reflected"], **options)
-        from saucerfab.cli.design import check_weights
-
-        check_weights(
-            argparse.Namespace(ablation=request.ablation, w_large=request.w_large, w_small=request.w_small, lam=request.lam)
-        )
+        check_weights(request.ablation, {w.key: getattr(request, w.key) for w in WEIGHTS})
         check_height_scale(request.height_scale)
     except SaucerfabError as exc:
         raise ConfigError(f"{where} design_options: {exc}") from None
