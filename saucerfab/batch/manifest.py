@@ -397,7 +397,7 @@ def _check_design_options(
     command line), the value checks are ``DesignRequest``'s and
     :func:`~saucerfab.optimize.stages.check_weights`' (a weight the ablation does not use), and the
     resolution and image-size ranges are those of the scene the run builds
-    (:func:`~saucerfab.optimize.pipeline.build_scene`, as the design's
+    (:func:`~saucerfab.optimize.prepare.build_scene`, as the design's
     ``prepare`` does). A job with a scene *file* has its overrides checked on
     the paper preset's scene (the ranges do not depend on the scene) and
     its cup with the scene file when the job runs: the file is the job's
@@ -437,7 +437,7 @@ def _scene_problem(scene: str, cup: str | None, options: dict[str, Any]) -> str 
     """Why the design run's scene (preset ``scene``, ``cup`` override) cannot be built
     with these design options, in the design's own words, or None when it can."""
     from saucerfab.errors import SaucerfabError
-    from saucerfab.optimize.pipeline import build_scene
+    from saucerfab.optimize.prepare import build_scene
     from saucerfab.optimize.request import DesignRequest
 
     try:
