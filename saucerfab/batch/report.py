@@ -38,11 +38,10 @@ from pathlib import Path
 from typing import Any
 
 from saucerfab import __version__
+from saucerfab.batch.manifest import HTML_NAME, JSON_NAME
 from saucerfab.fileio import write_text_atomic
 
 REPORT_SCHEMA = "saucerfab.batch-report/1"
-JSON_NAME = "batch-report.json"
-HTML_NAME = "batch-report.html"
 
 
 @dataclass
