@@ -147,9 +147,6 @@ class DesignRequest(_Weights):
     color_init: str = COLOR_INITS[0]
     record_times: bool = True
 
-    ENHANCEMENTS = ENHANCEMENTS
-    ABLATIONS = ABLATIONS
-
     def fit_by_view(self) -> dict[str, str]:
         """The fit rule of each view (``direct``, ``reflected``, ``reflected2``) from :attr:`fit`.
 
