@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT))
 from saucerfab.design import Design  # noqa: E402
 from saucerfab.heightfield import laplacian  # noqa: E402
 from saucerfab.optimize.energies import DeformEnergy, barrier_floor, e_barrier, e_visual  # noqa: E402
-from saucerfab.optimize.pipeline import prepare  # noqa: E402
+from saucerfab.optimize.prepare import prepare  # noqa: E402
 from saucerfab.optimize.previews import final_visual_error  # noqa: E402
 from saucerfab.optimize.request import DesignRequest  # noqa: E402
 from saucerfab.optimize.solver import ProxSettings, SolverSettings, solve  # noqa: E402

@@ -42,6 +42,9 @@ MAX_SHAPE_PIXELS = 4096 * 4096
 #: over about 1e5 units and overflows at 3.4e38 (a "starting point must be
 #: strictly feasible" or "view axis is vertical" deep in the optimizer).
 MAX_RELIEF_PER_SIZE = 100.0
+#: model units per unit of a shape file's values (the default of load_shape and
+#: of a design's ``height_scale``): the artists' saucers rise a few times the height bound delta
+HEIGHT_SCALE = 0.1
 
 
 @dataclass(frozen=True)
@@ -264,7 +267,7 @@ def load_shape(
     source: str | os.PathLike[str],
     n: int,
     *,
-    height_scale: float = 0.1,
+    height_scale: float = HEIGHT_SCALE,
     seed: int = 0,
     saucer: Saucer | None = None,
 ) -> np.ndarray:
@@ -275,8 +278,7 @@ def load_shape(
             an 8/16-bit grayscale PNG (white = ``height_scale``) or a 2-D
             ``.npy`` array (values multiplied by ``height_scale``).
         n: grid resolution (vertices per side).
-        height_scale: model units per unit of the file's values (0.1: the
-            artists' saucers rise a few times the height bound delta).
+        height_scale: model units per unit of the file's values (:data:`HEIGHT_SCALE`).
         seed: seed for the seeded shapes.
         saucer: the saucer the shape is for; a file's heights must lie within
             :func:`allowed_height` of it (default: the paper's saucer).

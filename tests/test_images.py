@@ -649,7 +649,7 @@ def test_crop_fills_the_frame_and_cuts_the_long_side_equally():
 
 def test_design_fit_and_background_options(tmp_path):
     from saucerfab.errors import ConfigError
-    from saucerfab.optimize.pipeline import prepare
+    from saucerfab.optimize.prepare import prepare
     from saucerfab.optimize.request import DesignRequest
 
     samples = Path(__file__).resolve().parents[1] / "samples"

@@ -60,6 +60,7 @@ from pathlib import Path
 from typing import Any
 
 from saucerfab.errors import ConfigError
+from saucerfab.optimize.request import IMAGE_ROLES, DesignRequest
 
 #: largest manifest file accepted (a manifest is text listing jobs)
 MAX_MANIFEST_BYTES = 16 * 1024 * 1024
@@ -76,9 +77,13 @@ WINDOWS_DEVICES = frozenset({"CON", "PRN", "AUX", "NUL", "CONIN$", "CONOUT$",
 #: neither the parser nor any later walk of the data may run out of stack
 MAX_NESTING = 32
 
-#: keys naming input files of a design run (role -> required)
-IMAGE_KEYS = ("direct", "reflected", "reflected2", "direct_mask", "reflected_mask", "reflected2_mask")
-PATH_KEYS = ("design", *IMAGE_KEYS)
+#: what the batch itself writes in its output folder (saucerfab.batch.report, saucerfab.batch.runner)
+JSON_NAME = "batch-report.json"
+HTML_NAME = "batch-report.html"
+LOCK_NAME = ".saucerfab-batch.lock"
+SCRATCH_NAME = ".batch-tmp"
+
+PATH_KEYS = ("design", *IMAGE_ROLES)
 JOB_KEYS = frozenset(
     {
         "id",
@@ -102,21 +107,15 @@ def reserved_names() -> frozenset[str]:
     A job folder named like a report would replace it (and every later write
     of the report would fail on the folder); the hidden names cannot match
     :data:`ID_RE` today, but are listed so that they stay reserved if it changes.
-    (Imported here, not at the top: the runner imports this module.)
     """
-    from saucerfab.batch.report import HTML_NAME, JSON_NAME
-    from saucerfab.batch.runner import LOCK_NAME, SCRATCH_NAME
-
     return frozenset({JSON_NAME, HTML_NAME, LOCK_NAME, SCRATCH_NAME})
 
 
 def design_option_keys() -> frozenset[str]:
     """Fields of :class:`~saucerfab.optimize.request.DesignRequest` a job may override."""
-    from saucerfab.optimize.request import DesignRequest
-
     # printer and cup_diameter_mm are the job's own keys: the design is made for the
     # printer and size the job exports for (saucerfab.optimize.printable)
-    taken = {*IMAGE_KEYS, "shape", "scene", "cup", "extra", "printer", "cup_diameter_mm"}
+    taken = {*IMAGE_ROLES, "shape", "scene", "cup", "printer", "cup_diameter_mm"}
     return frozenset(f.name for f in fields(DesignRequest) if f.init and f.name not in taken)
 
 
@@ -268,7 +267,7 @@ def _build_job(raw: dict[str, Any], root: Path, where: str) -> JobSpec:
         raise ConfigError(f"{where}: unknown format(s) {bad}; known: {list(FORMATS)}")
 
     has_design = raw.get("design") not in (None, "")
-    has_raw = any(raw.get(k) not in (None, "") for k in (*IMAGE_KEYS, "shape", "scene", "cup"))
+    has_raw = any(raw.get(k) not in (None, "") for k in (*IMAGE_ROLES, "shape", "scene", "cup"))
     design_options = _options(raw.get("design_options"), f"{where} design_options")
     export_options = _options(raw.get("export_options"), f"{where} export_options")
     if has_design and (has_raw or design_options):
@@ -295,11 +294,11 @@ def _build_job(raw: dict[str, Any], root: Path, where: str) -> JobSpec:
             f"missing {missing}"
         )
     files: dict[str, Path] = {}
-    for k in IMAGE_KEYS:
+    for k in IMAGE_ROLES:
         if raw.get(k) not in (None, ""):
             files[k] = resolve_inside(root, raw[k], f"{where} {k}")
-    shape = raw.get("shape", "waves")
-    scene = raw.get("scene", "paper")
+    shape = raw.get("shape", DesignRequest.default("shape"))
+    scene = raw.get("scene", DesignRequest.default("scene"))
     if not isinstance(shape, str) or not shape:
         raise ConfigError(f"{where}: 'shape' must be a built-in shape name or a .png/.npy file, got {shape!r}")
     if not isinstance(scene, str) or not scene:
@@ -382,8 +381,6 @@ def _request_hints() -> dict[str, Any]:
     """:class:`DesignRequest`'s field annotations, evaluated once (get_type_hints is slow)."""
     import typing
 
-    from saucerfab.optimize.request import DesignRequest
-
     return typing.get_type_hints(DesignRequest)
 
 
@@ -395,19 +392,18 @@ def _check_design_options(
     The rules are the CLI's own, not copies: the option types are the
     :class:`DesignRequest` field annotations (argparse's ``type=`` on the
     command line), the value checks are ``DesignRequest``'s and
-    ``check_weights``' (a weight the ablation does not use), and the
+    :func:`~saucerfab.optimize.stages.check_weights`' (a weight the ablation does not use), and the
     resolution and image-size ranges are those of the scene the run builds
-    (:func:`~saucerfab.optimize.pipeline.build_scene`, as the design's
+    (:func:`~saucerfab.optimize.prepare.build_scene`, as the design's
     ``prepare`` does). A job with a scene *file* has its overrides checked on
     the paper preset's scene (the ranges do not depend on the scene) and
     its cup with the scene file when the job runs: the file is the job's
     input, read when the job runs, not when the manifest loads.
     """
-    import argparse
-
     from saucerfab.errors import SaucerfabError
     from saucerfab.heightfield import check_height_scale
-    from saucerfab.optimize.request import DesignRequest
+    from saucerfab.optimize.energies import WEIGHTS
+    from saucerfab.optimize.stages import check_weights
 
     hints = _request_hints()
     for name, value in sorted(options.items()):
@@ -416,11 +412,7 @@ def _check_design_options(
             raise ConfigError(f"{where} design_options: {name} must be {want}, got {value!r}")
     try:
         request = DesignRequest(direct=files["direct"], reflected=files["reflected"], **options)
-        from saucerfab.cli.design import check_weights
-
-        check_weights(
-            argparse.Namespace(ablation=request.ablation, w_large=request.w_large, w_small=request.w_small, lam=request.lam)
-        )
+        check_weights(request.ablation, {w.key: getattr(request, w.key) for w in WEIGHTS})
         check_height_scale(request.height_scale)
     except SaucerfabError as exc:
         raise ConfigError(f"{where} design_options: {exc}") from None
@@ -441,8 +433,7 @@ def _scene_problem(scene: str, cup: str | None, options: dict[str, Any]) -> str 
     """Why the design run's scene (preset ``scene``, ``cup`` override) cannot be built
     with these design options, in the design's own words, or None when it can."""
     from saucerfab.errors import SaucerfabError
-    from saucerfab.optimize.pipeline import build_scene
-    from saucerfab.optimize.request import DesignRequest
+    from saucerfab.optimize.prepare import build_scene
 
     try:
         build_scene(DesignRequest(direct=Path("direct"), reflected=Path("reflected"), scene=scene, cup=cup, **options))
@@ -484,9 +475,9 @@ def _merge(defaults: dict[str, Any], job: dict[str, Any]) -> dict[str, Any]:
     out = dict(defaults)
     # a job that names its own design folder does not inherit design-run inputs, and vice versa
     if job.get("design") not in (None, ""):
-        for k in (*IMAGE_KEYS, "shape", "scene", "cup", "design_options"):
+        for k in (*IMAGE_ROLES, "shape", "scene", "cup", "design_options"):
             out.pop(k, None)
-    elif any(job.get(k) not in (None, "") for k in IMAGE_KEYS):
+    elif any(job.get(k) not in (None, "") for k in IMAGE_ROLES):
         out.pop("design", None)
     for k, v in job.items():
         if k in ("design_options", "export_options") and isinstance(v, dict) and isinstance(out.get(k), dict):

@@ -37,11 +37,10 @@ from pathlib import Path
 from typing import Any
 
 from saucerfab import __version__
+from saucerfab.batch.manifest import HTML_NAME, JSON_NAME
 from saucerfab.fileio import write_text_atomic
 
 REPORT_SCHEMA = "saucerfab.batch-report/1"
-JSON_NAME = "batch-report.json"
-HTML_NAME = "batch-report.html"
 
 
 @dataclass
@@ -143,73 +142,85 @@ def report_dict(
     }
 
 
-_CSS = """
-body{font-family:system-ui,sans-serif;margin:2em;color:#222}
-h1{font-size:1.4em} table{border-collapse:collapse;width:100%;font-size:.9em}
-th,td{border-bottom:1px solid #ddd;padding:.35em .6em;text-align:left;vertical-align:top}
-th{background:#f4f4f4} td.num{text-align:right;font-variant-numeric:tabular-nums}
-.ok{color:#176b2c;font-weight:600} .failed{color:#b00020;font-weight:600} .pending{color:#666}
-.printable{color:#176b2c} .not-printable,.unreadable{color:#b00020}
-.summary span{margin-right:1.5em} code{font-size:.9em} pre{white-space:pre-wrap;font-size:.8em}
-"""
+#: inline styles of the status and verdict cells (the page's own CSS is the shared report page's)
+_STYLE = {
+    "ok": "color:#176b2c;font-weight:600", "failed": "color:#b00020;font-weight:600", "pending": "color:#666",
+    "printable": "color:#176b2c", "not printable": "color:#b00020", "unreadable": "color:#b00020",
+}
+_NUM = ' style="text-align:right;font-variant-numeric:tabular-nums"'
+
+
+def _style(key: str) -> str:
+    return f' style="{_STYLE[key]}"' if key in _STYLE else ""
+
+
+def _job_row(j: dict[str, Any]) -> str:
+    """One job's table row: id, kind, status, check verdict, reason, times and links to its files."""
+    e = html.escape
+    times = j.get("times") or {}
+
+    def t(k: str) -> str:
+        return f"{times[k]:.2f}" if k in times else ""
+
+    files = "".join(
+        f'<a href="{e(j["output"] + "/" + f)}">{e(f)}</a><br>'
+        for f in j.get("files", [])
+        if j.get("output") and f.startswith("export/") and "/" not in f[len("export/"):]
+        and not f.endswith((".png", ".mtl", ".json", ".html"))
+    )
+    for page, label in (("export/report.html", "print report"), ("design/report.html", "design report")):
+        if j.get("output") and page in j.get("files", []):
+            files += f'<a href="{e(j["output"] + "/" + page)}">{label}</a><br>'
+    preview = "design/previews/composite.png"
+    if j.get("output") and preview in j.get("files", []):
+        src = e(j["output"] + "/" + preview)
+        files += f'<a href="{src}"><img src="{src}" alt="preview" height="64"></a>'
+    reason = e(j.get("reason") or "")
+    if j.get("stage") and j.get("status") == "failed":
+        reason = f"<b>{e(j['stage'])}</b>: {reason}"
+    if j.get("trace"):
+        reason += f"<details><summary>traceback</summary><pre>{e(j['trace'])}</pre></details>"
+    status = e(j["status"]) + (" (reused)" if j.get("reused") else "")
+    verdict = j.get("verdict") or ""
+    return (
+        "<tr>"
+        f"<td><code>{e(j['id'])}</code></td><td>{e(j['kind'])}</td>"
+        f"<td{_style(j['status'])}>{status}</td>"
+        f"<td{_style(verdict)}>{e(verdict)}</td>"
+        f"<td>{reason}</td>"
+        f"<td{_NUM}>{t('design')}</td><td{_NUM}>{t('export')}</td>"
+        f"<td{_NUM}>{t('check')}</td><td{_NUM}>{t('total')}</td>"
+        f"<td>{files}</td></tr>"
+    )
 
 
 def report_html(data: dict[str, Any]) -> str:
-    """A self-contained HTML page for a report dict (no scripts, no outside files)."""
-    e = html.escape
+    """A self-contained HTML page for a report dict (no scripts, no outside files): :func:`saucerfab.report.html_report`."""
+    from saucerfab.report import Section, html_report
+
     s = data["summary"]
-    rows = []
-    for j in data["jobs"]:
-        times = j.get("times") or {}
-
-        def t(k: str) -> str:
-            return f"{times[k]:.2f}" if k in times else ""
-
-        files = "".join(
-            f'<a href="{e(j["output"] + "/" + f)}">{e(f)}</a><br>'
-            for f in j.get("files", [])
-            if j.get("output") and f.startswith("export/") and "/" not in f[len("export/"):]
-            and not f.endswith((".png", ".mtl", ".json", ".html"))
-        )
-        for page, label in (("export/report.html", "print report"), ("design/report.html", "design report")):
-            if j.get("output") and page in j.get("files", []):
-                files += f'<a href="{e(j["output"] + "/" + page)}">{label}</a><br>'
-        preview = "design/previews/composite.png"
-        if j.get("output") and preview in j.get("files", []):
-            src = e(j["output"] + "/" + preview)
-            files += f'<a href="{src}"><img src="{src}" alt="preview" height="64"></a>'
-        reason = e(j.get("reason") or "")
-        if j.get("stage") and j.get("status") == "failed":
-            reason = f"<b>{e(j['stage'])}</b>: {reason}"
-        if j.get("trace"):
-            reason += f"<details><summary>traceback</summary><pre>{e(j['trace'])}</pre></details>"
-        status = e(j["status"]) + (" (reused)" if j.get("reused") else "")
-        verdict = j.get("verdict") or ""
-        rows.append(
-            "<tr>"
-            f"<td><code>{e(j['id'])}</code></td><td>{e(j['kind'])}</td>"
-            f'<td class="{e(j["status"])}">{status}</td>'
-            f'<td class="{e(verdict.replace(" ", "-"))}">{e(verdict)}</td>'
-            f"<td>{reason}</td>"
-            f'<td class="num">{t("design")}</td><td class="num">{t("export")}</td>'
-            f'<td class="num">{t("check")}</td><td class="num">{t("total")}</td>'
-            f"<td>{files}</td></tr>"
-        )
-    return (
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-        f"<title>saucerfab batch report</title><style>{_CSS}</style></head><body>\n"
-        f"<h1>saucerfab batch report</h1>\n"
-        f"<p>Manifest <code>{e(data['manifest'])}</code>, output <code>{e(data['out'])}</code><br>"
-        f"{e(data['engine'])}; saucerfab {e(data['saucerfab_version'])}; started {e(str(data['started']))}, "
-        f"state <b>{e(data['state'])}</b>, {data['wall_s']:.1f} s</p>\n"
-        f"<p class=\"summary\"><span>{s['jobs']} jobs</span><span class=\"ok\">{s['ok']} ok</span>"
-        f"<span class=\"failed\">{s['failed']} failed</span><span class=\"pending\">{s['pending']} pending</span>"
-        f"<span>{s['reused']} reused from an earlier run</span></p>\n"
+    batch = {
+        "manifest": data["manifest"],
+        "output": data["out"],
+        "engine": data["engine"],
+        "saucerfab": data["saucerfab_version"],
+        "started": data["started"],
+        "state": data["state"],
+        "wall time": f"{data['wall_s']:.1f} s",
+    }
+    counts = (
+        f"<p>{s['jobs']} jobs: <span{_style('ok')}>{s['ok']} ok</span>, "
+        f"<span{_style('failed')}>{s['failed']} failed</span>, <span{_style('pending')}>{s['pending']} pending</span>, "
+        f"{s['reused']} reused from an earlier run</p>\n"
+    )
+    table = (
         "<table><thead><tr><th>job</th><th>kind</th><th>status</th><th>check</th><th>reason</th>"
         "<th>design s</th><th>export s</th><th>check s</th><th>total s</th><th>print files</th></tr></thead>\n<tbody>\n"
-        + "\n".join(rows)
-        + "\n</tbody></table>\n</body></html>\n"
+        + "\n".join(_job_row(j) for j in data["jobs"])
+        + "\n</tbody></table>"
     )
+    return html_report([Section("Batch", table=batch), Section("Jobs", html=counts + table)],
+                       title="saucerfab batch report")
 
 
 def write_reports(data: dict[str, Any], out: Path) -> None:

@@ -36,7 +36,7 @@ from saucerfab.batch.jobs import (
     load_payload,
     result_from_marker,
 )
-from saucerfab.batch.manifest import JobSpec, Manifest, load_manifest
+from saucerfab.batch.manifest import LOCK_NAME, SCRATCH_NAME, JobSpec, Manifest, load_manifest
 from saucerfab.batch.report import (
     BatchResult,
     JobOutcome,
@@ -47,8 +47,6 @@ from saucerfab.batch.report import (
 from saucerfab.errors import ConfigError, Interrupted, SaucerfabError
 from saucerfab.fileio import exclusive_lock
 
-LOCK_NAME = ".saucerfab-batch.lock"
-SCRATCH_NAME = ".batch-tmp"
 #: how often a job may be started again after its worker process died under it
 MAX_ATTEMPTS = 2
 

@@ -8,75 +8,83 @@ HELP = "optimize a saucer: direct + reflected image and a base shape -> design f
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options; every design option defaults to None ("not given") and its default is DesignRequest's."""
+    from saucerfab.optimize.energies import WEIGHTS
+    from saucerfab.optimize.request import (
+        ABLATIONS,
+        COLOR_INITS,
+        ENHANCEMENTS,
+        FRAMES,
+        PRISM_PLACEMENTS,
+        DesignRequest,
+    )
+
+    from saucerfab.scene import paper_scene
+
+    default = DesignRequest.default
+    paper = paper_scene()  # the default scene's sizes
     p.add_argument("--direct", required=True, help="image seen directly on the saucer")
     p.add_argument("--reflected", required=True, help="image seen in the mirror cup")
     p.add_argument("--reflected2", help="second reflected image (needs --cup prism:N)")
-    p.add_argument("--shape", default="waves", help="base shape: built-in name or .png/.npy (default waves)")
-    p.add_argument("--height-scale", type=float, default=0.1, help="model units per unit of a shape file")
-    p.add_argument("--scene", default="paper", help="scene TOML or preset (default: paper)")
+    p.add_argument("--shape", help=f"base shape: built-in name or .png/.npy (default {default('shape')})")
+    p.add_argument("--height-scale", type=float,
+                   help=f"model units per unit of a shape file (default {default('height_scale')})")
+    p.add_argument("--scene", help=f"scene TOML or preset (default: {default('scene')})")
     p.add_argument("--cup", help="cup override: circle[:R], ellipse:A,B[,ROT], prism:N[,R[,ROT]]")
     p.add_argument(
         "--printer",
-        default="j55",
         help="printer the design is made for: a profile name (see 'saucerfab printers') or a .toml; the "
-        "relief is kept within its minimum feature and a part that cannot fit it is refused now (default j55)",
+        f"relief is kept within its minimum feature and a part that cannot fit it is refused now (default "
+        f"{default('printer')})",
     )
     p.add_argument(
         "--cup-diameter-mm",
         type=float,
         help="the real cup's width across its footprint in mm: the design's physical scale (default: the "
-        "scene's, 80)",
+        f"scene's, {paper.cup_diameter_mm:g})",
     )
     p.add_argument("-o", "--out", required=True, help="design folder to write (an existing design needs --force)")
     p.add_argument("--force", action="store_true", help="replace the design already in --out")
-    p.add_argument("--resolution", type=int, help="heightfield vertices per side (default 150)")
-    p.add_argument("--image-size", type=int, help="rendered image size in pixels (default 512)")
+    p.add_argument("--resolution", type=int,
+                   help=f"heightfield vertices per side (default: the scene's, {paper.saucer.resolution})")
+    p.add_argument("--image-size", type=int,
+                   help=f"rendered image size in pixels (default: the scene's, {paper.direct.image_size})")
     p.add_argument(
         "--seed",
         type=int,
-        default=0,
-        help="seed of the random parts of a built-in base shape (default 0; a shape file has none)",
+        help=f"seed of the random parts of a built-in base shape (default {default('seed')}; a shape file has none)",
     )
     p.add_argument("--direct-mask", help="foreground mask for the direct image (white = foreground)")
     p.add_argument("--reflected-mask", help="foreground mask for the reflected image")
     p.add_argument("--reflected2-mask", help="foreground mask for the second reflected image")
-    p.add_argument("--w-large", type=float, help="E_deform weight at sigma 1e-5 (default 0.08 rho)")
-    p.add_argument("--w-small", type=float, help="E_deform weight at sigma 1e-7 (default 0.2 rho)")
-    p.add_argument("--lam", type=float, help="E_sparse weight (default 6e-5 rho)")
-    p.add_argument(
-        "--barrier-weight",
-        type=float,
-        default=0.01,
-        help="weight of the log barriers (eq. 5); 1 = the paper as written (default 0.01, see RESULTS.md)",
-    )
-    p.add_argument("--max-iters", type=int, default=400, help="iteration cap per stage (default 400)")
+    for w in WEIGHTS:  # one option per declared weight of an energy term
+        p.add_argument(w.option, type=float, help=f"{w.help} (default {w.default_text()})")
+    p.add_argument("--max-iters", type=int, help=f"iteration cap per stage (default {default('max_iters')})")
     p.add_argument(
         "--ablation",
-        default="full",
-        choices=["full", "no_deform", "laplacian", "laplacian_bw", "sparse_only", "laplacian_sparse"],
-        help="the paper's method (full) or one of Figure 11's ablations",
+        choices=ABLATIONS,
+        help=f"the paper's method ({default('ablation')}, the default) or one of Figure 11's ablations",
     )
     p.add_argument(
         "--frames",
-        default=None,
-        choices=["inscribed", "contain", "cover", "scene"],
+        choices=FRAMES,
         help="view frames: the largest square wholly on the saucer and wholly on its reflection, so each "
-        "whole image is seen (inscribed, the default); the largest square in the bounding box of each "
+        "whole image is seen (inscribed); the largest square in the bounding box of each "
         "(contain: larger pictures, the reflected one's corners fall off the reflection); so the saucer fills "
         "each frame (cover); or the scene's own frames (scene: the paper's preset, which puts part of each "
-        "image off the saucer)",
+        f"image off the saucer). Default {default('frames')}",
     )
     p.add_argument(
         "--prism-placement",
-        default="auto",
-        choices=["auto", "as_given"],
-        help="with --reflected2: turn the prism to the placement whose facet regions overlap least (auto)",
+        choices=PRISM_PLACEMENTS,
+        help="with --reflected2: turn the prism to the placement whose facet regions overlap least (auto), or "
+        f"keep the cup's rotation (as_given). Default {default('prism_placement')}",
     )
     p.add_argument(
         "--color-init",
-        default="gray",
-        choices=["gray", "projected"],
-        help="starting face colours: grey (the paper) or projected from the enhanced targets (Fig. 12 c)",
+        choices=COLOR_INITS,
+        help="starting face colours: grey (gray, the paper) or projected from the enhanced targets (projected, "
+        f"Fig. 12 c). Default {default('color_init')}",
     )
     p.add_argument(
         "--no-times",
@@ -85,25 +93,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--fit",
-        default=None,
         metavar="RULE",
         help="how each picture fills its square frame: pad (the whole picture, bands of --background beside a "
-        "non-square one; the default) or crop (the frame filled, the long side's margins cut off, as for "
-        "photos); or per picture, e.g. direct=crop,reflected=pad",
+        "non-square one) or crop (the frame filled, the long side's margins cut off, as for "
+        "photos); or per picture, e.g. direct=crop,reflected=pad. Default " + str(default("fit")),
     )
     p.add_argument(
         "--background",
-        default=None,
         metavar="COLOUR",
         help="#rrggbb of the padding and of what transparent areas show (default: each picture's border colour)",
     )
     p.add_argument(
         "--enhancement",
-        default=None,
-        choices=["auto", "subject", "none"],
+        choices=ENHANCEMENTS,
         help="conflict reduction of the full method: the paper's black-white enhancement (subject), none (the "
-        "pictures as they are), or auto (the default: subject when every picture has a clear subject - an alpha "
-        "channel, a mask file, or a subject on a plain background - else none, as for full-bleed photos)",
+        "pictures as they are), or auto (subject when every picture has a clear subject - an alpha "
+        "channel, a mask file, or a subject on a plain background - else none, as for full-bleed photos). "
+        f"Default {default('enhancement')}",
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON on stdout (progress stays on stderr)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
@@ -114,25 +120,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-#: weight option -> the StageSpec.weight it sets
-WEIGHT_OPTIONS = {"--w-large": "w_large", "--w-small": "w_small", "--lam": "lam"}
+def given_options(args: argparse.Namespace) -> dict[str, object]:
+    """The DesignRequest fields the user gave on the command line (the others keep their defaults)."""
+    from dataclasses import fields
 
+    from saucerfab.optimize.request import DesignRequest
 
-def check_weights(args: argparse.Namespace) -> None:
-    """Refuse a weight option that no stage of the chosen ablation uses (it would be ignored)."""
-    from saucerfab.errors import ConfigError
-    from saucerfab.optimize.stages import ABLATION_STAGES, weights_used
-
-    used = weights_used(args.ablation)
-    for option, key in WEIGHT_OPTIONS.items():
-        if getattr(args, key) is None or key in used:
-            continue
-        takers = ", ".join(a for a in ABLATION_STAGES if key in weights_used(a))
-        uses = ", ".join(o for o, k in WEIGHT_OPTIONS.items() if k in used) or "no weight option"
-        raise ConfigError(
-            f"{option} is not used by --ablation {args.ablation} (its stages use {uses}); "
-            f"drop {option}, or choose an --ablation that uses it ({takers})"
-        )
+    given = {f.name: getattr(args, f.name) for f in fields(DesignRequest) if getattr(args, f.name, None) is not None}
+    if args.no_times:
+        given["record_times"] = False
+    return given
 
 
 def _json_summary(out: object, meta: dict) -> dict:
@@ -162,47 +159,20 @@ def run(args: argparse.Namespace) -> int:
 
     from saucerfab.optimize.pipeline import check_output_folder, run_design
     from saucerfab.optimize.request import DesignRequest
+    from saucerfab.optimize.stages import check_weights
 
-    check_weights(args)
+    given = given_options(args)
+    check_weights(given.get("ablation", DesignRequest.default("ablation")), given)
     # the library replaces an earlier design folder (batch reruns); the command asks for --force
     check_output_folder(Path(args.out), force=args.force)
-    req = DesignRequest(
-        direct=args.direct,
-        reflected=args.reflected,
-        reflected2=args.reflected2,
-        shape=args.shape,
-        scene=args.scene,
-        cup=args.cup,
-        resolution=args.resolution,
-        image_size=args.image_size,
-        seed=args.seed,
-        direct_mask=args.direct_mask,
-        reflected_mask=args.reflected_mask,
-        reflected2_mask=args.reflected2_mask,
-        height_scale=args.height_scale,
-        w_large=args.w_large,
-        w_small=args.w_small,
-        lam=args.lam,
-        max_iters=args.max_iters,
-        barrier_weight=args.barrier_weight,
-        ablation=args.ablation,
-        **({"frames": args.frames} if args.frames is not None else {}),
-        **({"enhancement": args.enhancement} if args.enhancement is not None else {}),
-        **({"fit": args.fit} if args.fit is not None else {}),
-        **({"background": args.background} if args.background is not None else {}),
-        printer=args.printer,
-        cup_diameter_mm=args.cup_diameter_mm,
-        prism_placement=args.prism_placement,
-        color_init=args.color_init,
-        record_times=not args.no_times,
-    )
+    req = DesignRequest(**given)
     quiet = (lambda *a: None) if args.quiet else None
     out = run_design(req, args.out, progress=quiet)
     import json
 
     meta = json.loads((out / "design.json").read_text())
     m = meta["metrics"]
-    verified = None if args.no_verify else _verify(out, args)
+    verified = None if args.no_verify else _verify(out, req.printer, args)
     if args.json:
         doc = _json_summary(out, meta)
         doc["verify"] = verified.to_dict(record_times=not args.no_times) if verified is not None else None
@@ -242,7 +212,7 @@ def run(args: argparse.Namespace) -> int:
               f"per unit, relief +-{pt['delta_mm']:.2f} mm): minimum feature {pt['min_feature_mm']:g} mm and wall "
               f"{pt['min_wall_mm']:g} mm; {rule}")
     if verified is not None:
-        print(f"  verified a trial export ({args.printer}, OBJ) at {verified.res} px:")
+        print(f"  verified a trial export ({req.printer}, OBJ) at {verified.res} px:")
         for v in verified.files[0].views:
             psnr = "  -- " if v.psnr_db != v.psnr_db else f"{v.psnr_db:4.1f}"
             print(f"    {v.view:10s} from the {v.eye:6s} eye  {psnr} dB, {v.coverage * 100:3.0f}% of the frame"
@@ -251,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _verify(out, args: argparse.Namespace):  # type: ignore[no-untyped-def]
+def _verify(out, printer: str, args: argparse.Namespace):  # type: ignore[no-untyped-def]
     """The quick verify of a trial export, or None (with a note on stderr) when it cannot be made."""
     import sys
 
@@ -263,7 +233,7 @@ def _verify(out, args: argparse.Namespace):  # type: ignore[no-untyped-def]
             print(f"[verify {fraction * 100:5.1f}%] {msg}", file=sys.stderr, flush=True)
 
     try:
-        return verify_design(out, printer=args.printer, record_times=not args.no_times, progress=progress)
+        return verify_design(out, printer=printer, record_times=not args.no_times, progress=progress)
     except SaucerfabError as exc:  # the design itself is complete; say why it was not verified
         print(f"  note: the design is not verified: {exc}", file=sys.stderr)
         return None

@@ -13,12 +13,26 @@ Laplacian of the grid mesh (:func:`saucerfab.heightfield.laplacian`).
 
 Everything takes and returns torch tensors; energies are 0-d tensors so they
 can be back-propagated.
+
+The terms of the objective are declared here (:data:`TERMS`), each with the
+weights that may scale it (:data:`WEIGHTS`): the design request's weight
+fields, the ``saucerfab design`` weight options, the automatic rho-based
+weights and the energy log's columns are all read from these declarations,
+and :mod:`saucerfab.optimize.stages` says which stage uses which term.
+torch is imported inside the functions, so the declarations can be read
+without it (``saucerfab --help``, the batch manifest check).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
 import numpy as np
-import torch
+
+if TYPE_CHECKING:
+    import torch
 
 
 def e_visual(rendered: list[torch.Tensor], targets: list[torch.Tensor]) -> torch.Tensor:
@@ -28,6 +42,8 @@ def e_visual(rendered: list[torch.Tensor], targets: list[torch.Tensor]) -> torch
         rendered: per view an (S, S, 3) image.
         targets: per view an (S, S, 3) image of the same size.
     """
+    import torch
+
     # Accumulate in float64: a float32 sum over 1.5 M squared pixel errors
     # rounds by more than the changes the line search has to compare.
     total = rendered[0].new_zeros((), dtype=torch.float64)
@@ -49,6 +65,8 @@ class DeformEnergy:
     """
 
     def __init__(self, lap, base: torch.Tensor) -> None:  # type: ignore[no-untyped-def]
+        import torch
+
         csr = lap.tocsr()
         counts = np.diff(csr.indptr)
         k = int(counts.max())
@@ -71,6 +89,8 @@ class DeformEnergy:
         return (g * self.wts.to(h.dtype)).sum(dim=1)
 
     def __call__(self, h: torch.Tensor) -> torch.Tensor:
+        import torch
+
         return ((self.lz - self.apply(h)) ** 2).sum(dtype=torch.float64)
 
 
@@ -80,6 +100,8 @@ def e_barrier(h: torch.Tensor, z: torch.Tensor, c: torch.Tensor, delta: float) -
     Returns +inf when any variable is outside the open feasible box, as
     phi does; callers keep iterates strictly feasible (the line search).
     """
+    import torch
+
     dz = z - h
     cf = c.reshape(-1)
     # log of a non-positive number is -inf or NaN; one finiteness test at the
@@ -116,6 +138,8 @@ def prox_l1(x: torch.Tensor, center: torch.Tensor, threshold: float | torch.Tens
     the paper prints the offset ``x - h^e -+ lam alpha`` without adding
     ``h^e`` back; the minimiser of eq. 14 includes it.)
     """
+    import torch
+
     d = x - center
     return center + torch.sign(d) * torch.clamp(d.abs() - threshold, min=0.0)
 
@@ -123,3 +147,154 @@ def prox_l1(x: torch.Tensor, center: torch.Tensor, threshold: float | torch.Tens
 def feasible(h: torch.Tensor, z: torch.Tensor, c: torch.Tensor, delta: float) -> bool:
     """True when |z - h| < delta and 0 < c < 1 strictly (the barrier is finite)."""
     return bool(((z - h).abs() < delta).all() and (c > 0).all() and (c < 1).all())
+
+
+# --------------------------------------------------------------------------- declared terms
+
+#: an energy of a run: (h (V,), c (F, 3)) -> 0-d tensor; for a proximal term (h (V,), h^e (V,)) -> 0-d tensor
+Energy = Callable[["torch.Tensor", "torch.Tensor"], "torch.Tensor"]
+
+
+@dataclass(frozen=True)
+class Weight:
+    """A weight of an energy term that the user may set.
+
+    Each declared weight is a field of :class:`~saucerfab.optimize.request.DesignRequest`
+    and an option of ``saucerfab design`` (:attr:`option`). A weight with a
+    ``rho_factor`` is chosen per stage (``StageSpec.weight``), is
+    ``rho_factor * rho`` unless given (section 3.5) and is recorded in
+    design.json's ``weights_used``; a weight without one has a fixed
+    ``default`` and applies in every stage.
+
+    Attributes:
+        key: the request field, the CLI option (``--`` + key with ``-``) and the ``weights_used`` key.
+        help: one line for ``--help``; the default is added from ``rho_factor`` / ``default``.
+        rho_factor: the automatic weight's multiple of rho, or None for a fixed weight.
+        default: a fixed weight's default (None for a rho weight: "not given").
+        positive: the weight must be > 0 (else >= 0).
+    """
+
+    key: str
+    help: str
+    rho_factor: float | None = None
+    default: float | None = None
+    positive: bool = False
+
+    @property
+    def option(self) -> str:
+        """The ``saucerfab design`` option, e.g. ``--w-large``."""
+        return "--" + self.key.replace("_", "-")
+
+    @property
+    def per_stage(self) -> bool:
+        """True for a rho weight that a stage chooses; False for a fixed weight of every stage."""
+        return self.rho_factor is not None
+
+    def default_text(self) -> str:
+        """The default as ``--help`` says it: ``0.08 rho`` or ``0.01``."""
+        return f"{self.rho_factor:g} rho" if self.rho_factor is not None else f"{self.default:g}"
+
+
+@dataclass(frozen=True)
+class Problem:
+    """The fixed data of a run that the energies depend on besides (h, c).
+
+    Attributes:
+        z: (V,) base heights, model units (V = n * n).
+        delta: the height bound |z - h| < delta, model units.
+        n: heightfield vertices per side.
+        num_faces: F, saucer faces.
+    """
+
+    z: torch.Tensor
+    delta: float
+    n: int
+    num_faces: int
+
+
+@dataclass(frozen=True)
+class Term:
+    """One energy of the objective ``E = E_visual + sum_k w_k E_k``.
+
+    E_visual (the data term, weight 1) is not a Term: its targets are the
+    stage's. Every smooth term is evaluated and logged in every stage, in
+    :data:`TERMS` order, with weight 0 in a stage that neither uses it
+    (``StageSpec.regulariser``) nor has a fixed weight for it; a proximal
+    term is solved by the solver's proximal step (section 3.4.1) in the
+    stages that use it, centred on the heights the stage starts from.
+
+    Attributes:
+        name: what a stage's ``regulariser`` calls it; ``E_<name>`` (:attr:`key`)
+            names it in the energy log and the metrics.
+        weights: the weights that may scale it (a stage picks one of the rho weights).
+        make: builds the energy from the run's fixed data: ``make(problem) -> Energy``.
+        prox: the proximal operator ``prox(x, center, threshold)`` of a proximal
+            term; None for a smooth term.
+        floor: the smallest value of the term, per unit weight (the solver's
+            relative-change test subtracts the weighted floors), or None for 0.
+        in_metrics: its value after each stage (and a smooth term's at the end)
+            is reported in design.json's metrics.
+    """
+
+    name: str
+    weights: tuple[Weight, ...]
+    make: Callable[[Problem], Energy]
+    prox: Callable[..., torch.Tensor] | None = None
+    floor: Callable[[Problem], float] | None = None
+    in_metrics: bool = True
+
+    @property
+    def key(self) -> str:
+        """The term's name in the energy log and the metrics, e.g. ``E_deform``."""
+        return f"E_{self.name}"
+
+
+def _deform(p: Problem) -> Energy:
+    from saucerfab.heightfield import laplacian
+
+    deform = DeformEnergy(laplacian(p.n), p.z)
+    return lambda h, c: deform(h)
+
+
+def _barrier(p: Problem) -> Energy:
+    return lambda h, c: e_barrier(h, p.z, c, p.delta)
+
+
+#: the terms of the objective, in the order the energy log lists them
+TERMS: tuple[Term, ...] = (
+    Term(
+        "deform",
+        (
+            Weight("w_large", "E_deform weight in the stages at the large sigma", rho_factor=0.08),
+            Weight("w_small", "E_deform weight in the stages at the small sigma", rho_factor=0.2),
+        ),
+        _deform,
+    ),
+    Term(
+        "barrier",
+        (
+            Weight(
+                "barrier_weight",
+                # why 0.01: DesignRequest's docstring (the paper's 1 blunts the black-white contrast)
+                "weight of the log barriers (eq. 5); 1 = the paper as written, see RESULTS.md",
+                default=0.01,
+                positive=True,
+            ),
+        ),
+        _barrier,
+        floor=lambda p: barrier_floor(p.n * p.n, p.num_faces, p.delta),
+        in_metrics=False,
+    ),
+    Term("sparse", (Weight("lam", "E_sparse weight", rho_factor=6e-5),), lambda p: e_sparse, prox=prox_l1),
+)
+
+#: every declared weight, in :data:`TERMS` order
+WEIGHTS: tuple[Weight, ...] = tuple(w for t in TERMS for w in t.weights)
+
+
+def term(name: str) -> Term:
+    """The declared term called ``name`` (``deform``...)."""
+    for t in TERMS:
+        if t.name == name:
+            return t
+    raise KeyError(name)

@@ -29,7 +29,7 @@ from saucerfab.design import Design
 from saucerfab.render.camera import Camera
 
 if TYPE_CHECKING:
-    from saucerfab.optimize.pipeline import Prepared
+    from saucerfab.optimize.prepare import Prepared
     from saucerfab.optimize.views import Rig
 
 CUP_GREY = np.array([0.80, 0.82, 0.85])

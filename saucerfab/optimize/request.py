@@ -1,14 +1,22 @@
-"""What a design run is asked to do: inputs, scene, sizes, weights, switches."""
+"""What a design run is asked to do: inputs, scene, sizes, weights, switches.
+
+:class:`DesignRequest` is the one home of a design run's defaults and of the
+lists of choices its options take (``saucerfab design`` and the batch
+manifest read them from here). Its weight fields come from the declared
+energy terms (:data:`saucerfab.optimize.energies.WEIGHTS`).
+"""
 
 from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, make_dataclass
 from pathlib import Path
-from typing import Any
 
 from saucerfab.errors import ConfigError
+from saucerfab.heightfield import HEIGHT_SCALE
+from saucerfab.optimize.energies import WEIGHTS
+from saucerfab.optimize.stages import ABLATION_STAGES, MAX_ITERS
 from saucerfab.scene import VIEW_NAMES
 
 #: the request's image fields: one picture per view, and its optional foreground mask
@@ -16,12 +24,34 @@ IMAGE_ROLES = VIEW_NAMES + tuple(f"{v}_mask" for v in VIEW_NAMES)
 
 #: conflict-reduction strategies of the full method: "subject" is the paper's
 #: black-white enhancement (each picture needs a clear subject), "none" uses the
-#: pictures as they are (Figure 11 e), "auto" picks per pair (see optimize/pipeline.py)
+#: pictures as they are (Figure 11 e), "auto" picks per pair (see optimize/prepare.py)
 ENHANCEMENTS = ("auto", "subject", "none")
+#: the paper's method ("full") and Figure 11's ablations
+ABLATIONS = tuple(ABLATION_STAGES)
+#: view frames (the first is the default; see DesignRequest.frames)
+FRAMES = ("inscribed", "contain", "cover", "scene")
+#: prism placements with a second reflected image (the first is the default)
+PRISM_PLACEMENTS = ("auto", "as_given")
+#: starting face colours (the first is the default)
+COLOR_INITS = ("gray", "projected")
+
+#: one keyword-only field per declared weight: a rho weight is None ("automatic") unless given
+_Weights = make_dataclass(
+    "_Weights",
+    [(w.key, float | None if w.per_stage else float, field(default=w.default, kw_only=True)) for w in WEIGHTS],
+    frozen=True,
+)
+
+
+def _one_of(name: str, value: object, choices: tuple[str, ...]) -> None:
+    """Refuse ``value`` unless it is one of ``choices``."""
+    if value not in choices:
+        listed = ", ".join(repr(c) for c in choices[:-1]) + f" or {choices[-1]!r}"
+        raise ConfigError(f"{name} must be {listed}, got {value!r}")
 
 
 @dataclass(frozen=True)
-class DesignRequest:
+class DesignRequest(_Weights):
     """All inputs of one ``saucerfab design`` run.
 
     Attributes:
@@ -36,17 +66,20 @@ class DesignRequest:
         seed: seed for everything random (seeded shapes, tie breaks).
         direct_mask, reflected_mask, reflected2_mask: optional foreground mask images.
         height_scale: model units per unit of a shape file's values.
-        w_large, w_small, lam: weights overriding the automatic rho-based ones
-            (w for E_deform at sigma 1e-5 and 1e-7, lambda for E_sparse).
+        w_large, w_small, lam, barrier_weight: the weights of the energy terms,
+            one keyword-only field per declared weight
+            (:data:`saucerfab.optimize.energies.WEIGHTS`). w_large, w_small
+            (E_deform at sigma 1e-5 and 1e-7) and lam (E_sparse) override the
+            automatic rho-based weights when given. barrier_weight weighs
+            E_barrier (eq. 5) in the objective; 1 is the paper as written.
+            The barrier only has to keep iterates feasible (the line search
+            does too). At weight 1 a face covering a few pixels settles near
+            c = 0.33 instead of the enhancement's black, which blunts the
+            black-white contrast; at the default 0.01 the full method reaches
+            lower E_visual and E_deform (RESULTS.md).
         max_iters: iteration cap per stage.
-        barrier_weight: weight of E_barrier (eq. 5) in the objective; 1 is the
-            paper as written. The barrier only has to keep iterates feasible
-            (the line search does too). At weight 1 a face covering a few
-            pixels settles near c = 0.33 instead of the enhancement's black,
-            which blunts the black-white contrast; at the default 0.01 the
-            full method reaches lower E_visual and E_deform (RESULTS.md).
-        ablation: one of "full" (the paper's method), "no_deform", "laplacian",
-            "laplacian_bw", "sparse_only", "laplacian_sparse" (Figure 11 a-f).
+        ablation: "full" (the paper's method) or one of Figure 11's ablations
+            (:data:`ABLATIONS`, the keys of :data:`saucerfab.optimize.stages.ABLATION_STAGES`).
         frames: "inscribed" (the default) re-aims the scene's view frames at
             the largest square wholly on the saucer and wholly on its
             reflection, so each whole picture is seen; "contain" at the
@@ -101,26 +134,18 @@ class DesignRequest:
     direct_mask: Path | None = None
     reflected_mask: Path | None = None
     reflected2_mask: Path | None = None
-    height_scale: float = 0.1
-    w_large: float | None = None
-    w_small: float | None = None
-    lam: float | None = None
-    max_iters: int = 400
-    barrier_weight: float = 0.01
+    height_scale: float = HEIGHT_SCALE
+    max_iters: int = MAX_ITERS
     ablation: str = "full"
-    frames: str = "inscribed"
-    enhancement: str = "auto"
+    frames: str = FRAMES[0]
+    enhancement: str = ENHANCEMENTS[0]
     fit: str = "pad"
     background: str | None = None
     printer: str = "j55"
     cup_diameter_mm: float | None = None
-    prism_placement: str = "auto"
-    color_init: str = "gray"
+    prism_placement: str = PRISM_PLACEMENTS[0]
+    color_init: str = COLOR_INITS[0]
     record_times: bool = True
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    ENHANCEMENTS = ENHANCEMENTS
-    ABLATIONS = ("full", "no_deform", "laplacian", "laplacian_bw", "sparse_only", "laplacian_sparse")
 
     def fit_by_view(self) -> dict[str, str]:
         """The fit rule of each view (``direct``, ``reflected``, ``reflected2``) from :attr:`fit`.
@@ -130,7 +155,7 @@ class DesignRequest:
         """
         from saucerfab.images import FITS
 
-        views = ("direct", "reflected", "reflected2")
+        views = VIEW_NAMES
         text = str(self.fit).strip().lower()
         if text in FITS:
             return dict.fromkeys(views, text)
@@ -146,12 +171,12 @@ class DesignRequest:
         return out
 
     def __post_init__(self) -> None:
-        for name in ("direct", "reflected", "reflected2", "direct_mask", "reflected_mask", "reflected2_mask"):
+        for name in IMAGE_ROLES:
             v = getattr(self, name)
             if v is not None:
                 object.__setattr__(self, name, Path(os.fspath(v)))
-        if self.ablation not in self.ABLATIONS:
-            raise ConfigError(f"unknown ablation {self.ablation!r}; use one of {self.ABLATIONS}")
+        if self.ablation not in ABLATIONS:
+            raise ConfigError(f"unknown ablation {self.ablation!r}; use one of {ABLATIONS}")
         self.fit_by_view()  # refuses a bad --fit now, before any work
         if self.background is not None:
             from saucerfab.images import parse_colour
@@ -164,12 +189,9 @@ class DesignRequest:
                 f"--enhancement {self.enhancement} chooses the targets of the full method, but --ablation "
                 f"{self.ablation} fixes its own; give one of the two"
             )
-        if self.frames not in ("scene", "contain", "cover", "inscribed"):
-            raise ConfigError(f"frames must be 'scene', 'contain', 'cover' or 'inscribed', got {self.frames!r}")
-        if self.prism_placement not in ("auto", "as_given"):
-            raise ConfigError(f"prism_placement must be 'auto' or 'as_given', got {self.prism_placement!r}")
-        if self.color_init not in ("gray", "projected"):
-            raise ConfigError(f"color_init must be 'gray' or 'projected', got {self.color_init!r}")
+        _one_of("frames", self.frames, FRAMES)
+        _one_of("prism_placement", self.prism_placement, PRISM_PLACEMENTS)
+        _one_of("color_init", self.color_init, COLOR_INITS)
         v = self.cup_diameter_mm
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0):
             raise ConfigError(f"cup_diameter_mm must be a positive number of millimetres, got {v!r}")
@@ -177,9 +199,14 @@ class DesignRequest:
             raise ConfigError(f"printer must be a profile name such as 'j55' or a .toml path, got {self.printer!r}")
         if self.max_iters < 1:
             raise ConfigError(f"max_iters must be at least 1, got {self.max_iters}")
-        if not (self.barrier_weight > 0):
-            raise ConfigError(f"barrier_weight must be positive, got {self.barrier_weight!r}")
-        for name in ("w_large", "w_small", "lam"):
-            v = getattr(self, name)
-            if v is not None and not (v >= 0):
-                raise ConfigError(f"{name} must be a non-negative number, got {v!r}")
+        for w in WEIGHTS:
+            v = getattr(self, w.key)
+            if w.positive and not (v > 0):
+                raise ConfigError(f"{w.key} must be positive, got {v!r}")
+            if not w.positive and v is not None and not (v >= 0):
+                raise ConfigError(f"{w.key} must be a non-negative number, got {v!r}")
+
+    @classmethod
+    def default(cls, name: str) -> object:
+        """The default of field ``name`` (for ``--help`` texts), e.g. ``DesignRequest.default("max_iters")``."""
+        return cls.__dataclass_fields__[name].default

@@ -51,7 +51,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-from saucerfab.optimize.energies import feasible, prox_l1
+from saucerfab.optimize.energies import e_sparse, feasible, prox_l1
+from saucerfab.optimize.stages import MAX_ITERS
 
 #: share of its distance to a bound that one step may take a coordinate (interior-point practice)
 FRACTION_TO_BOUNDARY = 0.99
@@ -92,7 +93,7 @@ class SolverSettings:
     eps: float = 1e-8
     tol: float = 1e-4
     patience: int = 3
-    max_iters: int = 400
+    max_iters: int = MAX_ITERS
     max_backtracks: int = 6
     max_rejections: int = 4
     armijo: float = 1e-4
@@ -107,17 +108,23 @@ class SolverSettings:
 
 @dataclass(frozen=True)
 class ProxSettings:
-    """The sparse-spike stage's proximal step (eq. 13-15).
+    """The proximal step of a proximal term (eq. 13-15): by default the sparse-spike stage's E_sparse.
 
     Attributes:
         center: (V,) h^e, the heights after the enhanced stage.
-        lam: lambda, weight of E_sparse.
+        lam: lambda, weight of the term.
         alpha: the proximal step (paper: 0.2), in units of the Adamax step.
+        name: the term's key in the logged parts.
+        value: the term, ``value(h, center)`` -> 0-d tensor (E_sparse, eq. 9).
+        operator: its proximal operator ``operator(x, center, threshold)`` (soft thresholding, eq. 15).
     """
 
     center: torch.Tensor
     lam: float
     alpha: float = 0.2
+    name: str = "E_sparse"
+    value: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] = e_sparse
+    operator: Callable[..., torch.Tensor] = prox_l1
 
 
 @dataclass
@@ -209,8 +216,8 @@ def solve(
         e, parts = objective(hh, cc)
         total = float(e.detach())
         if prox is not None:
-            sp = float((hh.detach() - prox.center).abs().sum())
-            parts = {**parts, "E_sparse": sp}
+            sp = float(prox.value(hh.detach(), prox.center))
+            parts = {**parts, prox.name: sp}
             total += prox.lam * sp
         parts = {**parts, "E_total": total}
         e._saucerfab_inputs = (hh, cc)  # type: ignore[attr-defined]
@@ -245,7 +252,7 @@ def solve(
         else:
             step = prox.alpha * s.lr_h / u_h
             x = h - step * m_h
-            d_h = h - prox_l1(x, prox.center, prox.lam * step)
+            d_h = h - prox.operator(x, prox.center, prox.lam * step)
         # fraction to the boundary (interior-point practice): every beta in
         # (0, beta_max] keeps the box constraints strictly satisfied
         if s.boundary_rule == "coordinate":

@@ -22,11 +22,23 @@ moves made raised the final E_visual (7461 -> 7485-7528 over the lambdas,
 prox steps and line-search lengths tried). At sigma 1e-5 the same stage (the
 paper's lambda and alpha) moves 8 % of the vertices and lowers the final
 E_visual by 3.7 % (``benchmarks/bench_sparse_stage.py``; benchmarks/RESULTS.md).
+
+The energies a stage can use are declared in :mod:`saucerfab.optimize.energies`
+(:data:`~saucerfab.optimize.energies.TERMS`); a stage names its regulariser
+and the weight that scales it, and :func:`term_weight` gives every term's
+weight in a stage.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+
+from saucerfab.errors import ConfigError
+from saucerfab.optimize.energies import TERMS, WEIGHTS, Term
+
+#: iteration cap per stage (``DesignRequest.max_iters``, ``SolverSettings.max_iters``)
+MAX_ITERS = 400
 
 SIGMA_LARGE = 1e-5
 SIGMA_SMALL = 1e-7
@@ -42,8 +54,10 @@ class StageSpec:
         name: label in logs and design.json.
         targets: "enhanced" (eq. 7) or "original" (eq. 2).
         sigma: SoftRas sigma.
-        regulariser: "deform", "none" or "sparse".
-        weight: which weight applies: "w_large", "w_small", "lam" or "" for none.
+        regulariser: the name of the declared term (:data:`~saucerfab.optimize.energies.TERMS`)
+            the stage optimises with E_visual ("deform", "sparse"), or "none".
+        weight: the key of the term's per-stage weight that scales it
+            ("w_large", "w_small", "lam"), or "" for none.
     """
 
     name: str
@@ -87,18 +101,66 @@ def without_enhancement(stages: list[StageSpec]) -> list[StageSpec]:
     without enhancement, which benchmarks/RESULTS.md measures as good as or
     better than the full method on 2 of 3 bundled pairs.
     """
-    from dataclasses import replace
-
     return [
         replace(st, targets="original", name=st.name.replace("bw_", "plain_", 1)) if st.targets == "enhanced" else st
         for st in stages
     ]
 
 
-#: rho multipliers (section 3.5)
-WEIGHT_FACTORS = {"w_large": 0.08, "w_small": 0.2, "lam": 6e-5}
+#: rho multipliers of the per-stage weights (section 3.5), from their declarations
+WEIGHT_FACTORS: dict[str, float] = {w.key: w.rho_factor for w in WEIGHTS if w.rho_factor is not None}
+
+
+def _check_table() -> None:
+    """Every stage names a declared term and one of that term's per-stage weights (a developer's slip)."""
+    for ablation, stages in ABLATION_STAGES.items():
+        for st in stages:
+            allowed = {"none": {""}, **{t.name: {w.key for w in t.weights if w.per_stage} for t in TERMS}}
+            if st.weight not in allowed.get(st.regulariser, ()):
+                raise ValueError(f"stage {st.name} of {ablation}: regulariser {st.regulariser!r} with weight "
+                                 f"{st.weight!r}; declared: {allowed}")
+
+
+_check_table()
 
 
 def weights_used(ablation: str) -> set[str]:
     """The weight options (``w_large``, ``w_small``, ``lam``) that the stages of ``ablation`` use."""
     return {spec.weight for spec in ABLATION_STAGES[ablation] if spec.weight}
+
+
+def term_weight(spec: StageSpec, term: Term, values: Mapping[str, float]) -> float:
+    """The weight of ``term`` in stage ``spec``.
+
+    The stage's weight when the stage uses the term; else the term's fixed
+    weight (the barrier's, in every stage); else 0 (a smooth term is still
+    evaluated and logged, so every stage's log has the same columns).
+
+    Args:
+        values: weight key -> value, for the per-stage weights and the fixed ones.
+    """
+    if spec.regulariser == term.name:
+        return values[spec.weight]
+    fixed = [w for w in term.weights if not w.per_stage]
+    return values[fixed[0].key] if fixed else 0.0
+
+
+def check_weights(ablation: str, given: Mapping[str, float | None]) -> None:
+    """Refuse a per-stage weight that no stage of ``ablation`` uses (it would be ignored).
+
+    Args:
+        given: weight key -> the value given, None where not given.
+    Raises:
+        ConfigError: naming the option, the ablation's weight options and the ablations that use it.
+    """
+    used = weights_used(ablation)
+    per_stage = [w for w in WEIGHTS if w.per_stage]
+    for w in per_stage:
+        if given.get(w.key) is None or w.key in used:
+            continue
+        takers = ", ".join(a for a in ABLATION_STAGES if w.key in weights_used(a))
+        uses = ", ".join(v.option for v in per_stage if v.key in used) or "no weight option"
+        raise ConfigError(
+            f"{w.option} is not used by --ablation {ablation} (its stages use {uses}); "
+            f"drop {w.option}, or choose an --ablation that uses it ({takers})"
+        )

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from saucerfab.optimize.views import Rig, View
+from saucerfab.optimize.views import Rig, View, visible_faces
 
 
 def sample_bilinear(image: np.ndarray, px: np.ndarray) -> np.ndarray:
@@ -154,8 +154,6 @@ def projected_colors(rig: Rig, heights: np.ndarray, images: dict[str, np.ndarray
     in a reflection that reflection's, one seen in both the average, one
     seen in neither grey. Used to start the colours (paper, Figure 12 (c)).
     """
-    from saucerfab.optimize.texturing import visible_faces
-
     vis = visible_faces(rig, heights, supersample=1)
     acc = np.zeros((rig.num_faces, 3))
     cnt = np.zeros(rig.num_faces)

@@ -15,8 +15,9 @@ colours there (the paper's rule). Faces seen in neither keep their
 direct-view projection (clamped to the panel); the fabrication bake gives
 them a smooth continuation of their neighbours' colours.
 
-Visibility is read from the hard rasterizer's face buffer at ``supersample``
-times the view's resolution, so faces smaller than a pixel are not lost.
+Visibility (:func:`saucerfab.optimize.views.visible_faces`) is read from the
+hard rasterizer's face buffer at ``supersample`` times the view's
+resolution, so faces smaller than a pixel are not lost.
 """
 
 from __future__ import annotations
@@ -24,11 +25,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from saucerfab.design import FaceView
 from saucerfab.optimize.targets import sample_bilinear
-from saucerfab.optimize.views import Rig
+from saucerfab.optimize.views import Rig, visible_faces
 
 
 @dataclass
@@ -46,24 +46,6 @@ class TextureResult:
     face_uvs: np.ndarray
     face_view: np.ndarray
     face_panel: np.ndarray
-
-
-def visible_faces(rig: Rig, heights: np.ndarray, supersample: int = 2) -> dict[str, np.ndarray]:
-    """Per view, (F,) bool: saucer faces that cover a (super)sample in that view."""
-    from saucerfab.render import rasterize_hard
-
-    h = np.asarray(heights, np.float64).reshape(-1)
-    out = {}
-    for view in rig.views:
-        vis = np.zeros(rig.num_faces, bool)
-        if view.faces.shape[0]:
-            cam = view.camera.with_size(view.camera.image_size * supersample)
-            fid, _, _ = rasterize_hard(torch.as_tensor(view.vertices_np(h)), view.faces, cam)
-            ids = np.unique(np.asarray(fid))
-            ids = ids[ids >= 0]
-            vis[view.face_src.numpy()[ids]] = True
-        out[view.name] = vis
-    return out
 
 
 def classify_faces(visible: dict[str, np.ndarray]) -> np.ndarray:

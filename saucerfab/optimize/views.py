@@ -200,3 +200,21 @@ class Rig:
         for v in self.views[1:]:
             m[v.face_src.numpy()] = True
         return m
+
+
+def visible_faces(rig: Rig, heights: np.ndarray, supersample: int = 2) -> dict[str, np.ndarray]:
+    """Per view, (F,) bool: saucer faces that cover a (super)sample in that view."""
+    from saucerfab.render import rasterize_hard
+
+    h = np.asarray(heights, np.float64).reshape(-1)
+    out = {}
+    for view in rig.views:
+        vis = np.zeros(rig.num_faces, bool)
+        if view.faces.shape[0]:
+            cam = view.camera.with_size(view.camera.image_size * supersample)
+            fid, _, _ = rasterize_hard(torch.as_tensor(view.vertices_np(h)), view.faces, cam)
+            ids = np.unique(np.asarray(fid))
+            ids = ids[ids >= 0]
+            vis[view.face_src.numpy()[ids]] = True
+        out[view.name] = vis
+    return out
