@@ -15,7 +15,7 @@ import pytest
 import fixtures_check as fx
 from saucerfab.check import Limits, Report, check_mesh
 from saucerfab.errors import ConfigError
-from saucerfab.fabricate.profiles import load_profile
+from saucerfab.profiles import load_profile
 
 
 def codes(r: Report, severity: str | None = None) -> set[str]:

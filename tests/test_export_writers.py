@@ -190,7 +190,7 @@ def test_write_folder(tmp_path: Path) -> None:
 
 
 def test_every_writer_is_registered(tet: TexturedMesh) -> None:
-    from saucerfab.fabricate.profiles import FORMATS
+    from saucerfab.formats import FORMATS
 
     assert set(registry.WRITERS) == set(FORMATS)
     for fmt in FORMATS:

@@ -233,7 +233,7 @@ def load_payload(
     Raises:
         SaucerfabError: an input is missing or unreadable, or the printer is unknown.
     """
-    from saucerfab.fabricate.profiles import load_profile
+    from saucerfab.profiles import load_profile
 
     try:
         profile = load_profile(job.printer)

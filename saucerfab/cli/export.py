@@ -145,7 +145,7 @@ def _run_locked(args: argparse.Namespace, seat: str) -> int:
     """The export, check, verify and summary, with ``--out`` held by :func:`export_lock`."""
     from saucerfab.fabricate.options import FabOptions
     from saucerfab.fabricate.pipeline import export_design
-    from saucerfab.fabricate.profiles import load_profile
+    from saucerfab.profiles import load_profile
 
     check_other_export(args.design, args.out, args.force)
     options = FabOptions(

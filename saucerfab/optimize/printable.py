@@ -22,7 +22,7 @@ import numpy as np
 
 from saucerfab.errors import ConfigError
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.fabricate.profiles import PrinterProfile, load_profile
+from saucerfab.profiles import PrinterProfile, load_profile
 from saucerfab.heightfield import make_grid
 from saucerfab.relief import OPTIMIZER_TIGHTEN, blunt_thin_crests
 from saucerfab.scene import Scene
