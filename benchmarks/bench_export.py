@@ -77,7 +77,8 @@ def main() -> None:
 
     from saucerfab.fabricate.options import FabOptions
     from saucerfab.fabricate.pipeline import export_design
-    from saucerfab.fabricate.profiles import FORMATS, load_profile
+    from saucerfab.formats import FORMATS
+    from saucerfab.profiles import load_profile
     from saucerfab.fabricate.solid import build_solid
 
     design = bench_design(args.n)

@@ -80,7 +80,7 @@ def every_printer(design: Path, tmp: Path) -> dict[str, dict]:
     import contextlib
     import io
 
-    from saucerfab.fabricate.profiles import list_profiles
+    from saucerfab.profiles import list_profiles
 
     out: dict[str, dict] = {}
     for key in list_profiles():

@@ -18,12 +18,16 @@ print itself is complete and printable at that point.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import tempfile
 import zipfile
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from saucerfab.profiles import DEFAULT_PRINTER
 
 #: quick verify of every export: render size and samples per pixel
 QUICK_RES = 128
@@ -49,36 +53,72 @@ class Finished:
         return max([int(r.exit_code) for _, r in self.checks if r is not None], default=0)
 
 
-def check_file(path: Path, profile: Any) -> Any | None:
-    """``saucerfab.check.check_mesh(path, printer=profile)``, or None where the checker is absent.
+@dataclass(frozen=True)
+class MeshToCheck:
+    """One mesh file an export wrote, as the checker should read it.
 
-    A zipped OBJ (``--zip-obj``) is checked as what the bureau unpacks: the
-    archive (written by us a moment ago, so its names are safe) goes to a
-    temporary folder and its ``.obj`` is checked with the MTL and PNG beside it.
+    Attributes:
+        written: the file in the export folder (the mesh file, or the zip holding it).
+        name: how reports name it: the file's name, or ``<zip>/<entry>`` for a mesh inside a zip.
+        path: the file to check (a zip's entry unpacked into a scratch folder).
     """
+
+    written: Path
+    name: str
+    path: Path
+
+
+@contextlib.contextmanager
+def meshes_to_check(files: Mapping[str, Sequence[Path]], scratch: Path | None = None) -> Iterator[list[MeshToCheck]]:
+    """The mesh files of an export (format -> its written files), unpacked where zipped; for the ``with`` block.
+
+    Which files hold a mesh is :func:`saucerfab.formats.files_to_check`'s
+    answer. A zipped OBJ (``FabOptions.obj_zip``) is checked as what the
+    bureau unpacks: the archive's entries go to a temporary folder (under
+    ``scratch`` when given), removed when the block ends, and its mesh entry
+    is checked with the MTL and PNG beside it.
+
+    Raises:
+        ExportError: a format wrote no mesh file, or its zip holds an entry
+            that is not a plain file name (the export wrote it: an internal error).
+    """
+    from saucerfab.errors import ExportError
+    from saucerfab.formats import TABLE, files_to_check
+
+    with tempfile.TemporaryDirectory(prefix="saucerfab-check-", dir=scratch) as tmp:
+        out: list[MeshToCheck] = []
+        for fmt, paths in files.items():
+            suffix = TABLE[fmt].mesh_suffix
+            by_name = {p.name: p for p in paths}
+            found = []
+            for name in files_to_check(fmt, list(by_name)):
+                written = by_name[name]
+                if not name.lower().endswith(".zip"):
+                    found.append(MeshToCheck(written, name, written))
+                    continue
+                dest = Path(tmp) / name
+                with zipfile.ZipFile(written) as zf:
+                    for info in zf.infolist():
+                        entry = info.filename
+                        if info.is_dir() or "/" in entry or "\\" in entry or entry.startswith(".") or not entry:
+                            raise ExportError(f"the export's {name} holds an unexpected entry {entry!r}")
+                        dest.mkdir(parents=True, exist_ok=True)
+                        (dest / entry).write_bytes(zf.read(info))
+                        if entry.lower().endswith(suffix):
+                            found.append(MeshToCheck(written, f"{name}/{entry}", dest / entry))
+            if not found:
+                raise ExportError(f"the export wrote no {suffix} file for format {fmt!r}")
+            out += found
+        yield out
+
+
+def check_mesh_file(path: Path, profile: Any) -> Any | None:
+    """``saucerfab.check.check_mesh(path, printer=profile)``, or None where the checker is absent."""
     try:
         from saucerfab.check import check_mesh
     except ImportError:
         return None
-    if path.suffix != ".zip":
-        return check_mesh(path, printer=profile)
-    with tempfile.TemporaryDirectory(prefix="saucerfab-check-") as tmp, zipfile.ZipFile(path) as zf:
-        zf.extractall(tmp)
-        objs = sorted(Path(tmp).glob("*.obj"))
-        if not objs:
-            return check_mesh(path, printer=profile)
-        return check_mesh(objs[0], printer=profile)
-
-
-def mesh_files(result: Any) -> list[Path]:
-    """The files of an :class:`~saucerfab.fabricate.pipeline.ExportResult` that hold a mesh."""
-    from saucerfab.fabricate.registry import WRITERS
-
-    out: list[Path] = []
-    for fmt, paths in result.files.items():
-        suffix = WRITERS[fmt].mesh_suffix
-        out += [p for p in paths if p.suffix == suffix] or [p for p in paths if p.suffix == ".zip"]
-    return out
+    return check_mesh(path, printer=profile)
 
 
 def finish_print(
@@ -104,8 +144,9 @@ def finish_print(
     folder = Path(result.out)
     done = Finished()
     if check:
-        for path in mesh_files(result):
-            done.checks.append((path, check_file(path, profile)))
+        with meshes_to_check(result.files) as meshes:
+            # reported by the file written: a zipped OBJ is named by its zip
+            done.checks += [(m.written, check_mesh_file(m.path, profile)) for m in meshes]
         docs = []
         for path, rep in done.checks:
             if rep is None:
@@ -142,7 +183,7 @@ def finish_print(
 def verify_design(
     design_dir: str | Path,
     *,
-    printer: str = "j55",
+    printer: str = DEFAULT_PRINTER,
     cup_diameter_mm: float | None = None,
     record_times: bool = True,
     progress: Any = None,

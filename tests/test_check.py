@@ -15,7 +15,7 @@ import pytest
 import fixtures_check as fx
 from saucerfab.check import Limits, Report, check_mesh
 from saucerfab.errors import ConfigError
-from saucerfab.fabricate.profiles import load_profile
+from saucerfab.profiles import load_profile
 
 
 def codes(r: Report, severity: str | None = None) -> set[str]:
@@ -228,7 +228,7 @@ def test_saucerfab_exporters_output_passes(tmp_path: Path, saucer: tuple) -> Non
         texture_px=1024, vertex_rgb=np.full((len(V), 3), 128, np.uint8),
     )
     for fmt, writer in registry.WRITERS.items():
-        files = writer.load()(mesh)
+        files = writer.load_writer()(mesh)
         for name, data in files.items():
             (tmp_path / name).write_bytes(data)
         mesh_file = tmp_path / f"saucer{writer.mesh_suffix}"

@@ -37,7 +37,8 @@ from saucerfab.design import Design, FaceView, save_design, synthetic_design
 from saucerfab.errors import ConfigError, DesignError, ExportError, MeshError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.pipeline import ExportResult, export_design
-from saucerfab.fabricate.profiles import FORMATS, PrinterProfile, load_profile
+from saucerfab.formats import FORMATS
+from saucerfab.profiles import PrinterProfile, load_profile
 
 ROOT = Path(__file__).resolve().parents[1]
 GLTF_VALIDATOR = ROOT / "tools" / "node" / "node_modules" / "gltf-validator"

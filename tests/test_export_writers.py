@@ -80,7 +80,7 @@ def test_obj_mtl_png_and_zip(tet: TexturedMesh) -> None:
     assert text.count("\nv ") == 4 and text.count("\nvt ") == 5 and text.count("\nf ") == 4
     assert "f 1/1 3/3 2/2\n" in text and "f 1/5 4/4 3/3\n" in text  # 1-based, separate vt
     assert "map_Kd tet.png" in files["tet.mtl"].decode()
-    zipped = write_obj(tet, zipped=True)
+    zipped = write_obj(tet, FabOptions(obj_zip=True))
     assert list(zipped) == ["tet.zip"]
     zf = zipfile.ZipFile(io.BytesIO(zipped["tet.zip"]))
     assert {n: zf.read(n) for n in zf.namelist()} == files
@@ -190,7 +190,7 @@ def test_write_folder(tmp_path: Path) -> None:
 
 
 def test_every_writer_is_registered(tet: TexturedMesh) -> None:
-    from saucerfab.fabricate.profiles import FORMATS
+    from saucerfab.formats import FORMATS
 
     assert set(registry.WRITERS) == set(FORMATS)
     for fmt in FORMATS:

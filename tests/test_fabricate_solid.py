@@ -11,7 +11,7 @@ import pytest
 from saucerfab.design import Design, synthetic_design
 from saucerfab.errors import MeshError
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.fabricate.profiles import load_profile
+from saucerfab.profiles import load_profile
 from saucerfab.fabricate.solid import (
     OUTLINE_EPS_MM,
     Solid,

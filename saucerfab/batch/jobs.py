@@ -42,6 +42,7 @@ from saucerfab import __version__
 from saucerfab.batch.manifest import JobSpec
 from saucerfab.errors import InputFileError, Interrupted, SaucerfabError
 from saucerfab.fileio import atomic_dir, sha256_file
+from saucerfab.optimize.request import IMAGE_ROLES
 
 MARKER = "job.json"
 MARKER_SCHEMA = "saucerfab.batch-job/1"
@@ -50,8 +51,6 @@ KEY_SCHEMA = 1
 MAX_JOB_INPUT_BYTES = 1 << 30
 #: most files in one design folder
 MAX_DESIGN_FILES = 10_000
-#: main file suffix of each export format (the file the checker reads)
-MESH_SUFFIX = {"3mf": ".3mf", "obj": ".obj", "glb": ".glb", "ply": ".ply", "wrl": ".wrl", "stl": ".stl"}
 STAGES = ("design", "export", "check")
 VERDICT_RANK = {"printable": 0, "not printable": 1, "unreadable": 2}
 
@@ -233,7 +232,7 @@ def load_payload(
     Raises:
         SaucerfabError: an input is missing or unreadable, or the printer is unknown.
     """
-    from saucerfab.fabricate.profiles import load_profile
+    from saucerfab.profiles import load_profile
 
     try:
         profile = load_profile(job.printer)
@@ -250,7 +249,7 @@ def load_payload(
     if job.kind == "raw":
         by_role = {rel.split("/", 1)[0]: rel for rel in files}
         request = dict(job.design_options)
-        for role in ("direct", "reflected", "reflected2", "direct_mask", "reflected_mask", "reflected2_mask"):
+        for role in IMAGE_ROLES:
             if role in by_role:
                 request[role] = by_role[role]
         request["shape"] = by_role.get("shape", job.shape)
@@ -341,6 +340,7 @@ def _collect(folder: Path, prefix: str) -> dict[str, bytes]:
 def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: list[str]) -> JobResult:
     from saucerfab.check import check_mesh
     from saucerfab.fabricate.pipeline import export_design
+    from saucerfab.finish import meshes_to_check
 
     inp, out = work / "in", work / "out"
     for rel, data in payload.files.items():
@@ -357,7 +357,7 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
         from saucerfab.optimize.request import DesignRequest
 
         kw = dict(payload.request)
-        for role in ("direct", "reflected", "reflected2", "direct_mask", "reflected_mask", "reflected2_mask"):
+        for role in IMAGE_ROLES:
             if role in kw:
                 kw[role] = inp / kw[role]
         for role in ("shape", "scene"):
@@ -404,9 +404,11 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
     t = time.perf_counter()
     checks: dict[str, Any] = {}
     reasons: list[str] = []
-    for fmt in payload.formats:
-        for rel, mesh in _meshes_to_check(fmt, [Path(p) for p in result.files.get(fmt, [])], export_dir, work):
-            report = check_mesh(mesh, printer=payload.printer)
+    written = {fmt: [Path(p) for p in result.files.get(fmt, [])] for fmt in payload.formats}
+    with meshes_to_check(written, scratch=work) as meshes:
+        for mesh in meshes:
+            rel = f"export/{mesh.name}"  # a zipped OBJ's entry: export/<zip>/<obj>
+            report = check_mesh(mesh.path, printer=payload.printer)
             d = report.to_dict()
             d["path"] = rel  # the path inside the job's folder, not the worker's scratch
             d.pop("elapsed_s", None)  # times go to the batch report; job files stay byte-identical
@@ -444,36 +446,6 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
         files=files,
         checks=checks,
     )
-
-
-def _meshes_to_check(fmt: str, paths: list[Path], export_dir: Path, work: Path) -> list[tuple[str, Path]]:
-    """(name inside the job folder, file to check) for each mesh file the export wrote.
-
-    An OBJ written as one zip (``obj_zip``) is unpacked into the scratch
-    folder and its ``.obj`` checked; it is named ``export/<zip>/<obj>``.
-    """
-    import zipfile
-
-    suffix = MESH_SUFFIX.get(fmt, f".{fmt}")
-    found: list[tuple[str, Path]] = []
-    for p in paths:
-        rel = "export/" + p.resolve().relative_to(export_dir.resolve()).as_posix()
-        if p.suffix.lower() == suffix:
-            found.append((rel, p))
-        elif p.suffix.lower() == ".zip":
-            dest = work / "unzipped" / p.name
-            with zipfile.ZipFile(p) as zf:
-                for info in zf.infolist():
-                    name = info.filename
-                    if info.is_dir() or "/" in name or "\\" in name or name.startswith(".") or not name:
-                        raise SaucerfabError(f"the export's {p.name} holds an unexpected entry {name!r}")
-                    dest.mkdir(parents=True, exist_ok=True)
-                    (dest / name).write_bytes(zf.read(info))
-                    if name.lower().endswith(suffix):
-                        found.append((f"{rel}/{name}", dest / name))
-    if not found:
-        raise SaucerfabError(f"the export wrote no {suffix} file for format {fmt!r}")
-    return found
 
 
 def _finding_counts(report: Any) -> dict[str, int]:

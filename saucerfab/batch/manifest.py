@@ -215,7 +215,7 @@ def _options(value: Any, where: str) -> dict[str, Any]:
 
 def _build_job(raw: dict[str, Any], root: Path, where: str) -> JobSpec:
     """A :class:`JobSpec` from one job's plain data (defaults merged already)."""
-    from saucerfab.fabricate.profiles import FORMATS
+    from saucerfab.formats import FORMATS
     from saucerfab.scene import PRESETS
 
     unknown = set(raw) - JOB_KEYS

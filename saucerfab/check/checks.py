@@ -30,7 +30,7 @@ from saucerfab.check.report import Finding, finding
 from saucerfab.check.topology import face_geometry, topology, weld
 
 if TYPE_CHECKING:
-    from saucerfab.fabricate.profiles import PrinterProfile
+    from saucerfab.profiles import PrinterProfile
 
 _TEXTURE_CODES = {
     "missing": "texture_missing",

@@ -36,32 +36,20 @@ SUBCOMMANDS: dict[str, str] = {
 
 
 def _available() -> dict[str, object]:
-    mods = {}
-    for name, mod in SUBCOMMANDS.items():
-        try:
-            mods[name] = importlib.import_module(f"saucerfab.cli.{mod}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"saucerfab.cli.{mod}":
-                continue  # not built yet
-            raise
-    return mods
+    """Every subcommand's module, by subcommand name."""
+    return {name: importlib.import_module(f"saucerfab.cli.{mod}") for name, mod in SUBCOMMANDS.items()}
 
 
 def version_text() -> str:
     """saucerfab, Python and torch versions, and the compute device in use."""
     import platform
 
-    lines = [f"saucerfab {__version__}", f"Python {platform.python_version()}"]
-    try:
-        import torch
+    import torch
 
-        gpu = torch.cuda.is_available()
-        dev = f"GPU ({torch.cuda.get_device_name(0)})" if gpu else "CPU (no CUDA GPU found)"
-        lines.append(f"torch {torch.__version__}")
-        lines.append(f"device {dev}")
-    except ImportError:
-        lines.append("torch not installed (needed by 'design')")
-    return "\n".join(lines)
+    gpu = torch.cuda.is_available()
+    dev = f"GPU ({torch.cuda.get_device_name(0)})" if gpu else "CPU (no CUDA GPU found)"
+    return "\n".join([f"saucerfab {__version__}", f"Python {platform.python_version()}",
+                      f"torch {torch.__version__}", f"device {dev}"])
 
 
 class _VersionAction(argparse.Action):

@@ -12,7 +12,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-HELP = "check mesh files (3MF, OBJ, STL, PLY, GLB, VRML) for printability; exit 0/1/2"
+from saucerfab.formats import READERS, labels
+
+HELP = f"check mesh files ({labels(READERS.values())}) for printability; exit 0/1/2"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -15,9 +15,15 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import fields
 from pathlib import Path
+from typing import Any
 
-HELP = "turn a design into print-ready files (3MF, OBJ, GLB, PLY, VRML) with scene.json"
+from saucerfab.fabricate.options import SEAT_KINDS, FabOptions
+from saucerfab.formats import FORMATS, WRITERS, labels
+from saucerfab.profiles import DEFAULT_PRINTER
+
+HELP = f"turn a design into print-ready files ({labels(WRITERS.values())}) with scene.json"
 
 
 def _rgb(text: str) -> tuple[int, int, int]:
@@ -30,11 +36,20 @@ def _rgb(text: str) -> tuple[int, int, int]:
     return parts  # type: ignore[return-value]
 
 
+def _default(name: str) -> str:
+    """``FabOptions``'s default of option ``name`` as help texts show it (``3``, ``200,200,200``)."""
+    v = next(f.default for f in fields(FabOptions) if f.name == name)
+    return ",".join(map(str, v)) if isinstance(v, tuple) else f"{v:g}" if isinstance(v, float) else str(v)
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    # FabOptions settings default to None ("not given"): run passes on only those given, so
+    # each default is FabOptions' own (help texts read it from there)
     p.add_argument("design", help="the design folder (from 'saucerfab design')")
     p.add_argument("-o", "--out", required=True, help="output folder (new, empty, or a previous export of this design)")
     p.add_argument("--force", action="store_true", help="replace an earlier export of another design in --out")
-    p.add_argument("--printer", default="j55", help="printer profile key or .toml path (default j55; see 'saucerfab printers')")
+    p.add_argument("--printer", default=DEFAULT_PRINTER,
+                   help=f"printer profile key or .toml path (default {DEFAULT_PRINTER}; see 'saucerfab printers')")
     p.add_argument(
         "--cup-diameter-mm",
         type=float,
@@ -45,23 +60,31 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--formats",
         default=None,
-        help="comma-separated: 3mf, obj, glb, ply, wrl, stl (default: the printer's preferred format)",
+        help=f"comma-separated: {', '.join(FORMATS)} (default: the printer's preferred format)",
     )
-    p.add_argument("--texture-px", type=int, default=None, help="atlas edge in pixels, a power of two (default: from the printer's dpi)")
+    p.add_argument("--texture-px", dest="texture_px", type=int,
+                   help="atlas edge in pixels, a power of two (default: from the printer's dpi)")
     g = p.add_argument_group("solid and cup seat (millimetres)")
-    g.add_argument("--base-mm", type=float, default=3.0, help="plate thickness under the cup's standing plane (default 3)")
-    g.add_argument("--min-thickness-mm", type=float, default=2.0, help="material under the saucer's lowest point (default 2)")
-    # default None: "not given", so run can refuse --no-seat with an explicit --seat recess/ring
-    g.add_argument("--seat", choices=("recess", "ring", "none"), default=None, help="cup seat kind (default recess)")
+    g.add_argument("--base-mm", dest="base_thickness_mm", type=float, metavar="BASE_MM",
+                   help=f"plate thickness under the cup's standing plane (default {_default('base_thickness_mm')})")
+    g.add_argument("--min-thickness-mm", dest="min_thickness_mm", type=float,
+                   help=f"material under the saucer's lowest point (default {_default('min_thickness_mm')})")
+    g.add_argument("--seat", dest="seat", choices=SEAT_KINDS, help=f"cup seat kind (default {_default('seat')})")
     g.add_argument("--no-seat", action="store_true", help="same as --seat none")
-    g.add_argument("--seat-depth-mm", type=float, default=1.5, help="recess depth or ring height (default 1.5)")
-    g.add_argument("--seat-clearance-mm", type=float, default=0.5, help="gap around the cup's footprint (default 0.5)")
-    g.add_argument("--seat-rim-mm", type=float, default=4.0, help="plate width around the recess (default 4)")
+    g.add_argument("--seat-depth-mm", dest="seat_depth_mm", type=float,
+                   help=f"recess depth or ring height (default {_default('seat_depth_mm')})")
+    g.add_argument("--seat-clearance-mm", dest="seat_clearance_mm", type=float,
+                   help=f"gap around the cup's footprint (default {_default('seat_clearance_mm')})")
+    g.add_argument("--seat-rim-mm", dest="seat_rim_mm", type=float,
+                   help=f"plate width around the recess (default {_default('seat_rim_mm')})")
     c = p.add_argument_group("colour and files")
-    c.add_argument("--wall-rgb", type=_rgb, default=(200, 200, 200), help="sRGB of walls, base and seat (default 200,200,200)")
-    c.add_argument("--no-inpaint", action="store_true", help="leave unseen areas in the wall colour instead of continuing their neighbours' colours")
-    c.add_argument("--zip-obj", action="store_true", help="write OBJ + MTL + PNG as one zip (what bureaus ask for)")
-    c.add_argument("--name", default="saucer", help="file stem of the written files (default saucer)")
+    c.add_argument("--wall-rgb", dest="wall_rgb", type=_rgb,
+                   help=f"sRGB of walls, base and seat (default {_default('wall_rgb')})")
+    c.add_argument("--no-inpaint", dest="inpaint", action="store_const", const="none",
+                   help="leave unseen areas in the wall colour instead of continuing their neighbours' colours")
+    c.add_argument("--zip-obj", dest="obj_zip", action="store_const", const=True,
+                   help="write OBJ + MTL + PNG as one zip (what bureaus ask for)")
+    c.add_argument("--name", dest="name", help=f"file stem of the written files (default {_default('name')})")
     p.add_argument("--no-check", action="store_true", help="skip the validity check of the written files")
     p.add_argument("--no-verify", action="store_true",
                    help="skip the quick ray-traced verify of the print (see 'saucerfab verify' for a full one)")
@@ -76,8 +99,12 @@ def _size(n: int) -> str:
     return f"{n} B"
 
 
-def _seat(args: argparse.Namespace) -> str:
-    """The seat kind from --seat and --no-seat; refuses the two contradicting each other."""
+def given_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The :class:`FabOptions` settings the user gave, by field name (``--no-seat`` as ``seat="none"``).
+
+    Raises:
+        ConfigError: ``--no-seat`` together with ``--seat recess`` or ``ring``.
+    """
     from saucerfab.errors import ConfigError
 
     if args.no_seat and args.seat not in (None, "none"):
@@ -85,7 +112,10 @@ def _seat(args: argparse.Namespace) -> str:
             f"--no-seat and --seat {args.seat} contradict each other; give --seat {args.seat} "
             "for a seat, or --no-seat (same as --seat none) for none, not both"
         )
-    return "none" if args.no_seat else (args.seat or "recess")
+    given = {f.name: getattr(args, f.name) for f in fields(FabOptions) if getattr(args, f.name, None) is not None}
+    if args.no_seat:
+        given["seat"] = "none"
+    return given
 
 
 def _design_inputs(folder: Path) -> object:
@@ -132,35 +162,22 @@ def check_other_export(design: str, out: str, force: bool) -> None:
 def run(args: argparse.Namespace) -> int:
     from saucerfab.fabricate.pipeline import export_lock
 
-    seat = _seat(args)
+    given = given_options(args)
     # One export per --out at a time, held from the look at what --out holds
     # to the last line printed: the export replaces the folder whole, and the
     # check and verify read (and the report names) the files it wrote, which
     # a second export into the folder would remove.
     with export_lock(args.out):
-        return _run_locked(args, seat)
+        return _run_locked(args, given)
 
 
-def _run_locked(args: argparse.Namespace, seat: str) -> int:
+def _run_locked(args: argparse.Namespace, given: dict[str, Any]) -> int:
     """The export, check, verify and summary, with ``--out`` held by :func:`export_lock`."""
-    from saucerfab.fabricate.options import FabOptions
     from saucerfab.fabricate.pipeline import export_design
-    from saucerfab.fabricate.profiles import load_profile
+    from saucerfab.profiles import load_profile
 
     check_other_export(args.design, args.out, args.force)
-    options = FabOptions(
-        base_thickness_mm=args.base_mm,
-        min_thickness_mm=args.min_thickness_mm,
-        seat=seat,
-        seat_depth_mm=args.seat_depth_mm,
-        seat_clearance_mm=args.seat_clearance_mm,
-        seat_rim_mm=args.seat_rim_mm,
-        texture_px=args.texture_px,
-        wall_rgb=tuple(args.wall_rgb),
-        inpaint="none" if args.no_inpaint else "harmonic",
-        obj_zip=args.zip_obj,
-        name=args.name,
-    )
+    options = FabOptions(**given)
     profile = load_profile(args.printer)
     formats = [f for f in args.formats.split(",") if f.strip()] if args.formats is not None else None
 

@@ -15,7 +15,7 @@ def run(args: argparse.Namespace) -> int:
     import json
     from dataclasses import asdict
 
-    from saucerfab.fabricate.profiles import list_profiles
+    from saucerfab.profiles import list_profiles
 
     profiles = list_profiles()
     if args.json:

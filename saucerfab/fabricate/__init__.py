@@ -16,5 +16,5 @@ folder -> print-ready files + ``scene.json`` + ``export.json``). Modules:
 * ``profiles``    printer profiles
 
 This package's ``__init__`` stays light (no mesh libraries, no torch) so that
-``saucerfab.fabricate.profiles`` can be used by the checker, which must start fast.
+``saucerfab.profiles`` can be used by the checker, which must start fast.
 """

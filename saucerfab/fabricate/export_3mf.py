@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from xml.sax.saxutils import escape, quoteattr
 
+from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.textured import TexturedMesh, deterministic_zip, fmt_rows, generator
 
 NS_CORE = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
@@ -86,8 +87,8 @@ def model_xml(mesh: TexturedMesh, texture_path: str) -> str:
     return "".join(out)
 
 
-def write_3mf(mesh: TexturedMesh) -> dict[str, bytes]:
-    """The ``<name>.3mf`` package as bytes (one entry in the returned dict)."""
+def write_3mf(mesh: TexturedMesh, options: FabOptions | None = None) -> dict[str, bytes]:
+    """The ``<name>.3mf`` package as bytes (one entry in the returned dict); no option changes it."""
     texture_path = f"/3D/Textures/{mesh.texture_name}"
     data = deterministic_zip(
         [

@@ -21,6 +21,7 @@ import struct
 
 import numpy as np
 
+from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.textured import TexturedMesh, generator
 
 #: node matrix (column-major, glTF order): z-up file frame -> glTF's y-up world
@@ -145,6 +146,6 @@ def glb_bytes(mesh: TexturedMesh) -> bytes:
     )
 
 
-def write_glb(mesh: TexturedMesh) -> dict[str, bytes]:
-    """``<name>.glb``."""
+def write_glb(mesh: TexturedMesh, options: FabOptions | None = None) -> dict[str, bytes]:
+    """``<name>.glb``; no option changes it."""
     return {f"{mesh.name}.glb": glb_bytes(mesh)}

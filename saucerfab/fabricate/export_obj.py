@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.textured import TexturedMesh, deterministic_zip, fmt_rows, generator
 
 UV_DECIMALS = 7
@@ -51,14 +52,14 @@ def obj_text(mesh: TexturedMesh) -> str:
     return "".join(lines)
 
 
-def write_obj(mesh: TexturedMesh, *, zipped: bool = False) -> dict[str, bytes]:
-    """``<name>.obj``, ``<name>.mtl`` and ``<name>.png``; or all three in ``<name>.zip``."""
+def write_obj(mesh: TexturedMesh, options: FabOptions | None = None) -> dict[str, bytes]:
+    """``<name>.obj``, ``<name>.mtl`` and ``<name>.png``; or all three in ``<name>.zip`` (``options.obj_zip``)."""
     files = {
         f"{mesh.name}.obj": obj_text(mesh).encode(),
         f"{mesh.name}.mtl": mtl_text(mesh).encode(),
         mesh.texture_name: mesh.texture_png,
     }
-    if not zipped:
+    if options is None or not options.obj_zip:
         return files
     entries = [(k, v, not k.endswith(".png")) for k, v in files.items()]
     return {f"{mesh.name}.zip": deterministic_zip(entries)}

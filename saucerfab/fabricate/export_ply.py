@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.textured import TexturedMesh, generator
 
 
@@ -38,6 +39,6 @@ def ply_bytes(mesh: TexturedMesh) -> bytes:
     return header + vert.tobytes() + face.tobytes()
 
 
-def write_ply(mesh: TexturedMesh) -> dict[str, bytes]:
-    """``<name>.ply``."""
+def write_ply(mesh: TexturedMesh, options: FabOptions | None = None) -> dict[str, bytes]:
+    """``<name>.ply``; no option changes it."""
     return {f"{mesh.name}.ply": ply_bytes(mesh)}

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.textured import TexturedMesh, generator
 
 
@@ -24,6 +25,6 @@ def stl_bytes(mesh: TexturedMesh) -> bytes:
     return head + np.uint32(tri.shape[0]).tobytes() + rec.tobytes()
 
 
-def write_stl(mesh: TexturedMesh) -> dict[str, bytes]:
-    """``<name>.stl``."""
+def write_stl(mesh: TexturedMesh, options: FabOptions | None = None) -> dict[str, bytes]:
+    """``<name>.stl``; no option changes it."""
     return {f"{mesh.name}.stl": stl_bytes(mesh)}

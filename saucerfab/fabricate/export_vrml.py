@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.textured import TexturedMesh, fmt_rows, generator
 
 UV_DECIMALS = 7
@@ -46,6 +47,6 @@ def wrl_text(mesh: TexturedMesh) -> str:
     return "".join(out)
 
 
-def write_vrml(mesh: TexturedMesh) -> dict[str, bytes]:
-    """``<name>.wrl`` and its texture ``<name>.png``."""
+def write_vrml(mesh: TexturedMesh, options: FabOptions | None = None) -> dict[str, bytes]:
+    """``<name>.wrl`` and its texture ``<name>.png``; no option changes them."""
     return {f"{mesh.name}.wrl": wrl_text(mesh).encode(), mesh.texture_name: mesh.texture_png}

@@ -36,7 +36,7 @@ from saucerfab import __version__
 from saucerfab.design import Design, load_design, reference_name
 from saucerfab.errors import ConfigError, DesignError, ExportError
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.fabricate.profiles import PrinterProfile, load_profile
+from saucerfab.profiles import DEFAULT_PRINTER, PrinterProfile, load_profile
 
 Progress = Callable[[str, float], None]
 
@@ -180,17 +180,11 @@ def _resolve_cup(design: Design, cup_diameter_mm: float | None) -> Design:
     return replace(design, scene=design.scene.with_changes(cup_diameter_mm=float(v)))
 
 
-def _fits(bbox: tuple[float, float, float], volume: tuple[float, float, float]) -> bool:
-    """Whether a part fits the build volume, turned about z as needed (z stays up)."""
-    (a, b), (p, q) = sorted(bbox[:2]), sorted(volume[:2])
-    return a <= p and b <= q and bbox[2] <= volume[2]
-
-
 def export_design(
     design: Design | str | os.PathLike[str],
     out: str | os.PathLike[str],
     *,
-    printer: str | PrinterProfile = "j55",
+    printer: str | PrinterProfile = DEFAULT_PRINTER,
     cup_diameter_mm: float | None = None,
     formats: Sequence[str] | None = None,
     options: FabOptions | None = None,
@@ -204,8 +198,8 @@ def export_design(
         printer: profile key (``j55``), path to a profile TOML, or a profile.
         cup_diameter_mm: the real cup's width (circle: diameter; ellipse: 2a;
             prism: 2 x circumradius), mm; None keeps the scene's.
-        formats: formats to write (``3mf``, ``obj``, ``glb``, ``ply``,
-            ``wrl``, ``stl``); None: the profile's preferred format.
+        formats: formats to write (keys or aliases of
+            :data:`saucerfab.formats.WRITERS`); None: the profile's preferred format.
         options: solid, seat and texture settings.
         progress: called with (step name, overall fraction in [0, 1]).
 
@@ -261,7 +255,7 @@ def export_design(
 
     solid = build_solid(dsg, scene.mm_per_unit, opts, profile)
     bbox = solid.bbox_mm
-    if not _fits(bbox, profile.build_volume_mm):
+    if not profile.fits(bbox):
         vol = " x ".join(f"{v:g}" for v in profile.build_volume_mm)
         raise ExportError(
             f"the part is {bbox[0]:.1f} x {bbox[1]:.1f} x {bbox[2]:.1f} mm, larger than "

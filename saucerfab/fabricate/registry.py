@@ -1,6 +1,7 @@
-"""The exporters by format, and the one place that writes the output folder.
+"""Running the exporters, and the one place that writes the output folder.
 
-Each writer is a pure function ``(TexturedMesh, FabOptions) -> {file name: bytes}``.
+The formats and their writers are rows of :data:`saucerfab.formats.TABLE`;
+each writer is a pure function ``(TexturedMesh, FabOptions) -> {file name: bytes}``.
 :func:`write_folder` writes all of them, plus ``scene.json`` and
 ``export.json``, as one folder via :func:`saucerfab.fileio.atomic_dir`: the
 folder appears complete or not at all.
@@ -8,49 +9,15 @@ folder appears complete or not at all.
 
 from __future__ import annotations
 
-import importlib
 import os
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from saucerfab.errors import ExportError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.textured import TexturedMesh
 from saucerfab.fileio import atomic_dir
-
-
-@dataclass(frozen=True)
-class Writer:
-    """One export format.
-
-    Attributes:
-        format: key used on the command line and in printer profiles.
-        module: module under ``saucerfab.fabricate`` holding the writer.
-        function: its writer function name.
-        description: one line for help texts.
-        mesh_suffix: suffix of the file that holds the mesh (what the checker reads).
-    """
-
-    format: str
-    module: str
-    function: str
-    description: str
-    mesh_suffix: str
-
-    def load(self) -> Callable[..., dict[str, bytes]]:
-        mod = importlib.import_module(f"saucerfab.fabricate.{self.module}")
-        return getattr(mod, self.function)
-
-
-WRITERS: dict[str, Writer] = {
-    "3mf": Writer("3mf", "export_3mf", "write_3mf", "3MF with texture (Materials extension)", ".3mf"),
-    "obj": Writer("obj", "export_obj", "write_obj", "OBJ + MTL + PNG (or one zip)", ".obj"),
-    "glb": Writer("glb", "export_glb", "write_glb", "binary glTF 2.0, metres, PBR", ".glb"),
-    "ply": Writer("ply", "export_ply", "write_ply", "PLY, per-vertex colour", ".ply"),
-    "wrl": Writer("wrl", "export_vrml", "write_vrml", "VRML 2.0 + PNG", ".wrl"),
-    "stl": Writer("stl", "export_stl", "write_stl", "binary STL, no colour", ".stl"),
-}
+from saucerfab.formats import WRITERS, lookup
 
 
 def normalize_formats(
@@ -72,11 +39,10 @@ def normalize_formats(
     out: list[str] = []
     warnings: list[str] = []
     for f in formats:
-        key = str(f).strip().lower().lstrip(".")
-        if key == "vrml":
-            key = "wrl"
-        if key not in WRITERS:
+        found = lookup(f)
+        if found is None or found.key not in WRITERS:
             raise ExportError(f"unknown export format {f!r}; known: {', '.join(WRITERS)}")
+        key = found.key
         if key in out:
             continue
         out.append(key)
@@ -91,11 +57,8 @@ def normalize_formats(
 
 
 def render(mesh: TexturedMesh, fmt: str, options: FabOptions) -> dict[str, bytes]:
-    """The files of one format, in memory."""
-    w = WRITERS[fmt].load()
-    if fmt == "obj":
-        return w(mesh, zipped=options.obj_zip)
-    return w(mesh)
+    """The files of one format (a key of :data:`~saucerfab.formats.WRITERS`), in memory."""
+    return WRITERS[fmt].load_writer()(mesh, options)
 
 
 def merge_files(per_format: Mapping[str, Mapping[str, bytes]], extra: Mapping[str, bytes]) -> dict[str, bytes]:

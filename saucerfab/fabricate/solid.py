@@ -55,7 +55,7 @@ import numpy as np
 from saucerfab.design import Design
 from saucerfab.errors import MeshError
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.fabricate.profiles import PrinterProfile
+from saucerfab.profiles import PrinterProfile
 from saucerfab.heightfield import make_grid, triangulate
 from saucerfab.relief import WALL_MARGIN, crest_widths, wall_widths
 

@@ -2,7 +2,7 @@
 
 A design knows its physical scale (``Scene.cup_diameter_mm``, so one model
 unit is ``Scene.mm_per_unit`` mm) and its printer (a profile from
-:mod:`saucerfab.fabricate.profiles`, the J55 unless asked otherwise). Before
+:mod:`saucerfab.profiles`, the J55 unless asked otherwise). Before
 any optimization :func:`preflight` refuses what cannot be printed whatever
 the optimizer does (a part larger than the build volume at the worst heights
 the height bound allows, seat or base walls under the printer's minimum wall,
@@ -22,7 +22,7 @@ import numpy as np
 
 from saucerfab.errors import ConfigError
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.fabricate.profiles import PrinterProfile, load_profile
+from saucerfab.profiles import PrinterProfile, load_profile
 from saucerfab.heightfield import make_grid
 from saucerfab.relief import OPTIMIZER_TIGHTEN, blunt_thin_crests
 from saucerfab.scene import Scene

@@ -27,6 +27,7 @@ import numpy as np
 
 from saucerfab.design import reference_name
 from saucerfab.errors import InputFileError
+from saucerfab.formats import TABLE
 
 #: largest scene.json read (a real one is about 1.5 kB)
 MAX_SCENE_JSON_BYTES = 1 << 20
@@ -36,8 +37,8 @@ MAX_REFERENCE_PIXELS = 4096 * 4096
 #: mesh formats verify renders, in the order it prefers them (textured formats;
 #: "zip" is an OBJ zipped with its MTL and PNG, as ``export --zip-obj`` writes it)
 RENDERED_FORMATS = ("obj", "zip", "3mf", "glb")
-#: suffix of each rendered format's mesh file
-_SUFFIX = {"obj": ".obj", "zip": ".zip", "3mf": ".3mf", "glb": ".glb"}
+#: suffix of each rendered format's mesh file (from the formats table)
+_SUFFIX = {f: TABLE[f].mesh_suffix if f in TABLE else f".{f}" for f in RENDERED_FORMATS}
 #: view names a print may have, in report order
 VIEW_NAMES = ("direct", "reflected", "reflected2")
 CUP_SHAPES = ("circle", "ellipse", "prism")

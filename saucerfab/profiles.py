@@ -4,18 +4,30 @@ Profiles are TOML files: the ones that ship live in ``printers/`` at the top
 of the project (and are packaged under ``saucerfab/data/printers``); a user's
 own are read from ``$SAUCERFAB_PRINTERS`` (a folder) or given as a path.
 Lengths are millimetres.
+
+Both the fabrication stage (what to build, how fine a texture) and the
+checker (will this file print there) read them, so this module sits at the
+package's top and imports nothing heavy.
 """
 
 from __future__ import annotations
 
 import os
-import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from saucerfab.errors import ConfigError
+from saucerfab.formats import FORMATS
+from saucerfab.tomlfile import read_toml
 
-FORMATS = ("3mf", "obj", "glb", "ply", "wrl", "stl")
+#: the profile used when none is named
+DEFAULT_PRINTER = "j55"
+#: what a profile may do about features under its ``min_feature_mm``
+THIN_POLICIES = ("warn", "refuse")
+#: largest profile file read (a real one is a few hundred bytes)
+MAX_PROFILE_BYTES = 100_000
 
 
 @dataclass(frozen=True)
@@ -72,21 +84,18 @@ def _default_dirs() -> list[Path]:
     if env:
         dirs.append(Path(env))
     here = Path(__file__).resolve()
-    dirs.append(here.parents[2] / "printers")  # source checkout
-    dirs.append(here.parents[1] / "data" / "printers")  # installed package data
+    dirs.append(here.parents[1] / "printers")  # source checkout
+    dirs.append(here.parent / "data" / "printers")  # installed package data
     return dirs
 
 
+#: keys a profile may leave out (PrinterProfile's defaults apply), and how each is read
+_OPTIONAL: dict[str, Callable[[Any], Any]] = {"max_triangles": int, "max_file_mb": float, "thin_policy": str, "notes": str}
+
+
 def _parse(path: Path) -> PrinterProfile:
-    if path.stat().st_size > 100_000:
-        raise ConfigError(f"printer profile {str(path)!r} is over 100 kB; a profile is a few lines")
-    try:
-        d = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"printer profile {str(path)!r} is not valid TOML: {exc}") from None
-    except RecursionError:  # tomllib parses nested arrays recursively: a hostile file exhausts the stack
-        raise ConfigError(f"printer profile {str(path)!r} nests arrays or tables too deeply to read; "
-                          "a profile is a few flat keys") from None
+    d = read_toml(path, "printer profile", max_bytes=MAX_PROFILE_BYTES, size_hint="a profile is a few lines",
+                  nesting_hint="a profile is a few flat keys")
     required = {
         "name", "build_volume_mm", "min_wall_mm", "min_feature_mm", "dpi",
         "max_texture_px", "accepted_formats", "preferred_format",
@@ -94,8 +103,7 @@ def _parse(path: Path) -> PrinterProfile:
     missing = required - set(d)
     if missing:
         raise ConfigError(f"printer profile {str(path)!r} lacks {sorted(missing)}")
-    allowed = required | {"max_triangles", "max_file_mb", "thin_policy", "notes"}
-    unknown = set(d) - allowed
+    unknown = set(d) - required - set(_OPTIONAL)
     if unknown:
         raise ConfigError(f"printer profile {str(path)!r} has unknown key(s) {sorted(unknown)}")
     try:
@@ -109,10 +117,7 @@ def _parse(path: Path) -> PrinterProfile:
             max_texture_px=int(d["max_texture_px"]),
             accepted_formats=tuple(str(f).lower() for f in d["accepted_formats"]),
             preferred_format=str(d["preferred_format"]).lower(),
-            max_triangles=int(d.get("max_triangles", 0)),
-            max_file_mb=float(d.get("max_file_mb", 0.0)),
-            thin_policy=str(d.get("thin_policy", "warn")),
-            notes=str(d.get("notes", "")),
+            **{k: convert(d[k]) for k, convert in _OPTIONAL.items() if k in d},  # others: the defaults
         )
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"printer profile {str(path)!r} has a bad value: {exc}") from None
@@ -126,12 +131,12 @@ def _parse(path: Path) -> PrinterProfile:
         or prof.max_texture_px < 256
         or bad
         or prof.preferred_format not in prof.accepted_formats
-        or prof.thin_policy not in ("warn", "refuse")
+        or prof.thin_policy not in THIN_POLICIES
     ):
         raise ConfigError(
             f"printer profile {str(path)!r} is inconsistent: build volume must be 3 positive sizes, "
             f"walls/features/dpi positive, max_texture_px >= 256, formats from {FORMATS} "
-            f"(unknown: {bad}), preferred among accepted, thin_policy warn|refuse"
+            f"(unknown: {bad}), preferred among accepted, thin_policy {'|'.join(THIN_POLICIES)}"
         )
     return prof
 
