@@ -21,7 +21,6 @@ from TOML with :func:`load_scene` and write one with :func:`scene_to_toml`.
 from __future__ import annotations
 
 import os
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -32,6 +31,7 @@ import numpy as np
 # re-exported here, where most callers have always imported them from.
 from saucerfab.cups import CircleCup, Cup, EllipseCup, PrismCup, cup_from_dict, cup_to_dict, parse_cup_spec
 from saucerfab.errors import ConfigError, GeometryError
+from saucerfab.tomlfile import read_toml
 from saucerfab.validate import as_vector, check_keys, check_positive
 
 Vec2 = tuple[float, float]
@@ -326,16 +326,12 @@ def load_scene(source: str | os.PathLike[str]) -> Scene:
         raise ConfigError(
             f"scene file {str(path)!r} not found; give a TOML file or a preset ({sorted(PRESETS)})"
         )
-    if path.stat().st_size > 1_000_000:
-        raise ConfigError(f"scene file {str(path)!r} is over 1 MB; a scene is a few lines of TOML")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"scene file {str(path)!r} is not valid TOML: {exc}") from None
-    except RecursionError:  # tomllib parses nested arrays recursively: a hostile file exhausts the stack
-        raise ConfigError(
-            f"scene file {str(path)!r} nests arrays or tables too deeply to be read; a scene is a few "
-            "tables of numbers and short lists"
-        ) from None
+    data = read_toml(
+        path,
+        "scene file",
+        max_bytes=1_000_000,
+        size_hint="a scene is a few lines of TOML",
+        nesting_hint="a scene is a few tables of numbers and short lists",
+    )
     return scene_from_dict(data)
 

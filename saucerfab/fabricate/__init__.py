@@ -1,4 +1,4 @@
-"""Fabrication: solid, UV atlas and bake, printer profiles, exporters.
+"""Fabrication: solid, UV atlas and bake, exporters (printer profiles: :mod:`saucerfab.profiles`).
 
 Entry point: :func:`saucerfab.fabricate.pipeline.export_design` (design
 folder -> print-ready files + ``scene.json`` + ``export.json``). Modules:
@@ -11,10 +11,9 @@ folder -> print-ready files + ``scene.json`` + ``export.json``). Modules:
 * ``textured``    :class:`TexturedMesh`, what every writer receives
 * ``export_3mf``, ``export_obj``, ``export_glb``, ``export_ply``, ``export_vrml``,
   ``export_stl``   one writer per format, each returning bytes
-* ``registry``    formats -> writers, and the one atomic folder write
+* ``registry``    the writers of the formats asked for (:mod:`saucerfab.formats`), and the one atomic folder write
 * ``scene_json``  ``scene.json`` (schema ``saucerfab.scene/1``)
-* ``profiles``    printer profiles
 
-This package's ``__init__`` stays light (no mesh libraries, no torch) so that
-``saucerfab.profiles`` can be used by the checker, which must start fast.
+This package's ``__init__`` stays light (no mesh libraries, no torch): importing
+``saucerfab.fabricate.options`` costs nothing.
 """

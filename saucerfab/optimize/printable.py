@@ -22,13 +22,10 @@ import numpy as np
 
 from saucerfab.errors import ConfigError
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.profiles import PrinterProfile, load_profile
+from saucerfab.profiles import DEFAULT_PRINTER, PrinterProfile, load_profile
 from saucerfab.heightfield import make_grid
 from saucerfab.relief import OPTIMIZER_TIGHTEN, blunt_thin_crests
 from saucerfab.scene import Scene
-
-#: the printer a design is made for when none is named (the paper's printer)
-DEFAULT_PRINTER = "j55"
 
 #: share of delta kept between a projected vertex and its bound (the solver's
 #: barrier needs iterates strictly inside the box)

@@ -17,6 +17,7 @@ from saucerfab.errors import ConfigError
 from saucerfab.heightfield import HEIGHT_SCALE
 from saucerfab.optimize.energies import WEIGHTS
 from saucerfab.optimize.stages import ABLATION_STAGES, MAX_ITERS
+from saucerfab.profiles import DEFAULT_PRINTER
 from saucerfab.scene import VIEW_NAMES
 
 #: the request's image fields: one picture per view, and its optional foreground mask
@@ -141,7 +142,7 @@ class DesignRequest(_Weights):
     enhancement: str = ENHANCEMENTS[0]
     fit: str = "pad"
     background: str | None = None
-    printer: str = "j55"
+    printer: str = DEFAULT_PRINTER
     cup_diameter_mm: float | None = None
     prism_placement: str = PRISM_PLACEMENTS[0]
     color_init: str = COLOR_INITS[0]
