@@ -89,6 +89,19 @@ class Cup(Protocol):
         """
         ...
 
+    def wall(self, segments: int = OUTLINE_SEGMENTS) -> np.ndarray:
+        """The mirror wall as straight pieces with their outward normals, for renderers.
+
+        Returns:
+            (S, 2, 4): for each piece its two ends as ``[x, y, nx, ny]``,
+            about the cup's axis in the cup's own length unit, (nx, ny) the
+            unit outward normal there (a smooth cup's exact normal at each
+            end, so shading is smooth; a facet's own normal at both ends).
+            A smooth cup gives ``segments`` pieces, a faceted one a piece
+            per facet.
+        """
+        ...
+
     def contains(self, xy: np.ndarray) -> np.ndarray:
         """True where points (..., 2) lie strictly inside the footprint."""
         ...
@@ -163,6 +176,9 @@ class CircleCup:
     def reflect_reference(self, camera: tuple[float, float, float], q_xy: tuple[float, float]) -> Reference:
         return reference_conic(self.radius, self.radius, 0.0, camera, q_xy)
 
+    def wall(self, segments: int = OUTLINE_SEGMENTS) -> np.ndarray:
+        return _conic_wall(self.radius, self.radius, 0.0, segments)
+
     def file_fields(self, to_mm: Callable[[float], float]) -> dict[str, Any]:
         return {"radius": to_mm(self.radius)}
 
@@ -230,6 +246,9 @@ class EllipseCup:
     def reflect_reference(self, camera: tuple[float, float, float], q_xy: tuple[float, float]) -> Reference:
         a, b = self.semi_axes
         return reference_conic(a, b, self.rotation_deg, camera, q_xy)
+
+    def wall(self, segments: int = OUTLINE_SEGMENTS) -> np.ndarray:
+        return _conic_wall(*self.semi_axes, self.rotation_deg, segments)
 
     def file_fields(self, to_mm: Callable[[float], float]) -> dict[str, Any]:
         return {
@@ -306,12 +325,30 @@ class PrismCup:
     def reflect_reference(self, camera: tuple[float, float, float], q_xy: tuple[float, float]) -> Reference:
         return reference_facets(self.boundary(), camera, q_xy)
 
+    def wall(self, segments: int = OUTLINE_SEGMENTS) -> np.ndarray:
+        corners = self.boundary()
+        mid = math.radians(self.rotation_deg) + 2 * np.pi * (np.arange(self.sides) + 0.5) / self.sides
+        normal = np.stack([np.cos(mid), np.sin(mid)], axis=1)  # each facet's, at its middle angle
+        ends = np.stack([corners, np.roll(corners, -1, axis=0)], axis=1)
+        return np.concatenate([ends, np.repeat(normal[:, None, :], 2, axis=1)], axis=2)
+
     def file_fields(self, to_mm: Callable[[float], float]) -> dict[str, Any]:
         return {
             "sides": int(self.sides),
             "circumradius": to_mm(self.circumradius),
             "rotation_deg": float(self.rotation_deg),
         }
+
+
+def _conic_wall(a: float, b: float, rotation_deg: float, segments: int) -> np.ndarray:
+    """:meth:`Cup.wall` of an elliptic cylinder with semi-axes (a, b) turned by ``rotation_deg``."""
+    t = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
+    r = rotation_matrix(rotation_deg)
+    point = np.stack([a * np.cos(t), b * np.sin(t)], axis=1) @ r.T
+    normal = np.stack([np.cos(t) / a, np.sin(t) / b], axis=1) @ r.T  # the gradient of x^2/a^2 + y^2/b^2
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    ends = np.concatenate([point, normal], axis=1)
+    return np.stack([ends, np.roll(ends, -1, axis=0)], axis=1)
 
 
 #: every cup shape by its ``kind``, in the order help texts list them

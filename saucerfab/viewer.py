@@ -43,6 +43,8 @@ from collections.abc import Mapping
 from importlib import resources
 from typing import Any
 
+import numpy as np
+
 from saucerfab.errors import ConfigError, InputFileError
 
 #: import-map specifier -> vendored file in saucerfab/data/viewer
@@ -55,7 +57,8 @@ _MODULES: dict[str, str] = {
     "three/addons/utils/SkeletonUtils.js": "SkeletonUtils.js",
 }
 
-_CUP_SHAPES = ("circle", "ellipse", "prism")
+#: straight pieces of a smooth cup's wall in the 3D view
+WALL_SEGMENTS = 192
 _ID_RE = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,63}")
 
 
@@ -90,13 +93,27 @@ def _check_scene(scene: Mapping[str, Any]) -> None:
         target, angle = direct["target"], direct["viewing_angle_deg"]
     except (KeyError, TypeError) as exc:
         raise ConfigError(f"viewer: scene.json lacks {exc}; pass an export's scene.json") from None
-    if shape not in _CUP_SHAPES:
-        raise ConfigError(f"viewer: cup shape must be one of {_CUP_SHAPES}, got {shape!r}")
+    _cup_wall(cup)  # refuses an unknown shape or bad fields now
     if len(position) != 3 or len(target) != 3 or not 0 < float(angle) < 90:
         raise ConfigError(
             f"viewer: bad camera/direct view in scene: position={position!r}, "
             f"target={target!r}, viewing_angle_deg={angle!r}"
         )
+
+
+def _cup_wall(cup: Mapping[str, Any]) -> np.ndarray:
+    """The wall of a ``scene.json`` cup (mm, about its axis): :meth:`saucerfab.cups.Cup.wall`, shape (S, 2, 4).
+
+    Raises:
+        ConfigError: not a cup saucerfab knows, or bad fields.
+    """
+    from saucerfab.cups import cup_from_dict
+
+    fields = {k: v for k, v in cup.items() if k not in ("center", "bottom_z")}
+    try:
+        return cup_from_dict(fields, "circle").wall(WALL_SEGMENTS)
+    except (ConfigError, TypeError, ValueError) as exc:
+        raise ConfigError(f"viewer: scene.json's cup is not one saucerfab can draw: {exc}") from None
 
 
 def viewer_html(
@@ -135,6 +152,7 @@ def viewer_html(
     script = (
         _SCRIPT.replace("__ROOT_ID__", _script_json(element_id))
         .replace("__SCENE__", _script_json(dict(scene)))
+        .replace("__CUP_WALL__", _script_json(_cup_wall(scene["cup"]).round(4).tolist()))
         .replace("__GLB_B64__", '"' + base64.b64encode(bytes(glb)).decode("ascii") + '"')
     )
     return _BODY.format(id=element_id, h=height_px) + _import_map() + script
@@ -156,6 +174,7 @@ Drag to orbit, scroll to zoom, right-drag to pan, double-click to reset; the cup
 _SCRIPT = r"""<script type="module">
 const ROOT_ID = __ROOT_ID__;
 const SCENE = __SCENE__;
+const CUP_WALL = __CUP_WALL__;
 const GLB_B64 = __GLB_B64__;
 const root = document.getElementById(ROOT_ID);
 const stage = document.getElementById(ROOT_ID + "-stage");
@@ -267,33 +286,10 @@ async function main() {
   const cupDef = SCENE.cup;
   const z0 = cupDef.bottom_z, z1 = cupDef.bottom_z + cupDef.height;
   const [ccx, ccy] = cupDef.center;
-  const rad = (d) => (d || 0) * Math.PI / 180;
   const ring = []; // [x, y, nx, ny] per wall vertex (mm, file frame), in pairs per segment
-  if (cupDef.shape === "circle" || cupDef.shape === "ellipse") {
-    const [sa, sb] = cupDef.shape === "circle" ? [cupDef.radius, cupDef.radius] : cupDef.semi_axes;
-    const t = cupDef.shape === "circle" ? 0 : rad(cupDef.rotation_deg);
-    const N = 192;
-    const pt = (k) => {
-      const phi = 2 * Math.PI * k / N;
-      const lx = sa * Math.cos(phi), ly = sb * Math.sin(phi);
-      let nx = Math.cos(phi) / sa, ny = Math.sin(phi) / sb;
-      const nl = Math.hypot(nx, ny); nx /= nl; ny /= nl;
-      const ct = Math.cos(t), st = Math.sin(t);
-      return [ccx + ct * lx - st * ly, ccy + st * lx + ct * ly, ct * nx - st * ny, st * nx + ct * ny];
-    };
-    for (let k = 0; k < N; k++) ring.push(pt(k), pt(k + 1));
-  } else if (cupDef.shape === "prism") {
-    const N = cupDef.sides, r = cupDef.circumradius, t = rad(cupDef.rotation_deg);
-    if (!(N >= 3)) throw new Error("a prism cup needs at least 3 sides, got " + N);
-    for (let k = 0; k < N; k++) {
-      const p0 = t + 2 * Math.PI * k / N, p1 = t + 2 * Math.PI * (k + 1) / N, pm = (p0 + p1) / 2;
-      const nx = Math.cos(pm), ny = Math.sin(pm);
-      ring.push([ccx + r * Math.cos(p0), ccy + r * Math.sin(p0), nx, ny],
-                [ccx + r * Math.cos(p1), ccy + r * Math.sin(p1), nx, ny]);
-    }
-  } else {
-    throw new Error("unknown cup shape " + JSON.stringify(cupDef.shape));
-  }
+  // the wall's straight pieces with their outward normals, from the cup's own
+  // shape (saucerfab.cups, Cup.wall), each end [x, y, nx, ny] in mm about the cup's axis
+  for (const [p, q] of CUP_WALL) ring.push([ccx + p[0], ccy + p[1], p[2], p[3]], [ccx + q[0], ccy + q[1], q[2], q[3]]);
   const wallPos = [], wallNrm = [], lidPos = [];
   const lidZ = z1;
   const push = (arr, v) => arr.push(v.x, v.y, v.z);
