@@ -12,7 +12,7 @@ this module applies it to a scene and a heightfield:
   reflected view's rasterizer;
 * :func:`visible_region`: which saucer samples the mirror shows.
 
-The per-shape names (:func:`reflect_circle_bisection`, ...,
+The per-shape names (:func:`reflect_bisection`, ...,
 :func:`reflect_point_reference`) are the cup-typed entry points the tests
 and the benchmark call; each hands over to the cup or to
 :mod:`saucerfab.reflection`.
@@ -34,26 +34,14 @@ from saucerfab.scene import Scene
 # --------------------------------------------------------------------------- per shape
 
 
-def reflect_circle_bisection(
-    cup: CircleCup, camera: tuple[float, float, float], xy: np.ndarray
+def reflect_bisection(
+    cup: CircleCup | EllipseCup, camera: tuple[float, float, float], xy: np.ndarray
 ) -> MirrorPiece:
-    """Reflection in a round cup by the paper's bisection on the angle POT: its one piece (facet -1).
+    """Reflection in a smooth cup by bisection (the paper's, on the angle POT for a round cup; on the
+    eccentric angle for an ellipse): its one piece (facet -1).
 
     Args:
-        cup: the circle cup (centre at the origin).
-        camera: (3,) camera position P, model units.
-        xy: (V, 2) saucer points Q, model units.
-    """
-    return cup.reflect(camera, xy)[0]
-
-
-def reflect_ellipse_bisection(
-    cup: EllipseCup, camera: tuple[float, float, float], xy: np.ndarray
-) -> MirrorPiece:
-    """Reflection in an elliptic cup by bisection on the eccentric angle: its one piece (facet -1).
-
-    Args:
-        cup: the ellipse cup (semi-axes, rotation about the origin).
+        cup: the circle or ellipse cup (centred at the origin).
         camera: (3,) camera position P, model units.
         xy: (V, 2) saucer points Q, model units.
     """

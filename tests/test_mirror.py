@@ -125,8 +125,8 @@ def test_reflection_laws_random_scenes(
     xy = np.stack([dist * np.cos(ang), dist * np.sin(ang)], axis=1)
     heights = rng.uniform(0.0, 0.2, 300)
     for cup, piece in (
-        (ell, mirror.reflect_ellipse_bisection(ell, camera, xy)),
-        (CircleCup(a), mirror.reflect_circle_bisection(CircleCup(a), camera, xy)),
+        (ell, mirror.reflect_bisection(ell, camera, xy)),
+        (CircleCup(a), mirror.reflect_bisection(CircleCup(a), camera, xy)),
     ):
         check_laws(piece, xy, heights, cup)
         assert not (piece.valid_xy & cup.contains(xy)).any()
@@ -147,7 +147,7 @@ def test_bisection_and_quartic_agree_for_the_circle() -> None:
     xy = np.concatenate(
         [saucer_xy(scene, 30), rng.uniform(-1.5, 1.5, (2000, 2))], axis=0
     )
-    bis = mirror.reflect_circle_bisection(CIRCLE, scene.camera, xy)
+    bis = mirror.reflect_bisection(CIRCLE, scene.camera, xy)
     qua = mirror.reflect_circle_quartic(CIRCLE, scene.camera, xy)
     # the quartic leaves out only points (nearly) on the line OP, where it degenerates
     on_line = np.abs(xy[:, 0]) < 1e-6
@@ -194,7 +194,7 @@ def test_prism_pieces_are_the_facets_the_camera_sees() -> None:
 
 def test_point_on_the_line_op_in_front_of_the_cup() -> None:
     camera = (0.0, -5.5, 5.0)
-    piece = mirror.reflect_circle_bisection(CIRCLE, camera, np.array([[0.0, -1.0]]))
+    piece = mirror.reflect_bisection(CIRCLE, camera, np.array([[0.0, -1.0]]))
     assert piece.valid_xy[0]
     np.testing.assert_allclose(piece.t_xy[0], [0.0, -0.4], atol=1e-12)
     np.testing.assert_allclose(piece.r_xy[0], [0.0, 0.2], atol=1e-12)  # -1 mirrored across y = -0.4
@@ -231,14 +231,14 @@ def test_invalid_points_are_flagged_and_finite(name: str) -> None:
 
 def test_point_on_the_outline_is_invalid_not_nan() -> None:
     pts = np.array([[0.0, -0.4], [0.4 * math.cos(-1.2), 0.4 * math.sin(-1.2)]])
-    piece = mirror.reflect_circle_bisection(CIRCLE, (0.0, -5.5, 5.0), pts)
+    piece = mirror.reflect_bisection(CIRCLE, (0.0, -5.5, 5.0), pts)
     assert not piece.valid_xy.any()
     assert np.isfinite(piece.r_xy).all() and np.isfinite(piece.t_frac).all()
 
 
 def test_t_above_the_rim_or_below_the_bottom_is_invalid() -> None:
     xy = np.array([[0.0, -1.0], [0.2, -0.8]])
-    piece = mirror.reflect_circle_bisection(CIRCLE, (0.0, -5.5, 5.0), xy)
+    piece = mirror.reflect_bisection(CIRCLE, (0.0, -5.5, 5.0), xy)
     h = np.zeros(2)
     tz = piece.t_z(h)
     assert (tz > 0).all()
@@ -254,9 +254,9 @@ def test_t_above_the_rim_or_below_the_bottom_is_invalid() -> None:
 def test_camera_inside_the_cup_is_a_geometry_error() -> None:
     xy = np.array([[0.0, -1.0]])
     for fn, cup in (
-        (mirror.reflect_circle_bisection, CIRCLE),
+        (mirror.reflect_bisection, CIRCLE),
         (mirror.reflect_circle_quartic, CIRCLE),
-        (mirror.reflect_ellipse_bisection, ELLIPSE),
+        (mirror.reflect_bisection, ELLIPSE),
         (mirror.reflect_prism, HEXAGON),
     ):
         with pytest.raises(GeometryError, match="inside"):
