@@ -53,23 +53,16 @@ from saucerfab.check.readers.safe import (
 )
 from saucerfab.check.readers.threemf_blocks import Block, fast_blocks
 from saucerfab.check.readers.threemf_grammar import TRI_ATTR_ORDER
-from saucerfab.check.readers.threemf_rules import (
-    CIPHER_MAGIC,
-    NS_CORE,
-    NS_MAT,
-    NS_PROD,
-    Rules,
-    declared_encoding,
-    root_namespaces,
-    xml_too_deep,
-)
+from saucerfab.check.readers.threemf_resources import check_resources
+from saucerfab.check.readers.threemf_rules import Rules
+from saucerfab.check.readers.threemf_spec import CIPHER_MAGIC
+from saucerfab.check.readers.threemf_spec import C as _C
+from saucerfab.check.readers.threemf_spec import M as _M  # M alone is a transform matrix in this module
+from saucerfab.check.readers.threemf_spec import P as _P
+from saucerfab.check.readers.xmlscan import declared_encoding, root_namespaces, xml_too_deep
 
 #: millimetres per 3MF unit
 UNITS_MM = {"micron": 0.001, "millimeter": 1.0, "centimeter": 10.0, "inch": 25.4, "foot": 304.8, "meter": 1000.0}
-
-_C = "{%s}" % NS_CORE
-_M = "{%s}" % NS_MAT
-_P = "{%s}" % NS_PROD
 
 # -- model structure ------------------------------------------------------------
 
@@ -179,7 +172,7 @@ class _Reader:
         self._index(p, root, blocks)
         res = root.find(_C + "resources")
         if res is not None:
-            self.rules.resources(p, res)
+            check_resources(self.rules, p, res)
         return p
 
     def _block(self, el: Any, blocks: list[Block], kind: str) -> Any:
@@ -341,9 +334,7 @@ class _Reader:
             raise ReadError("malformed", f"3MF refers to object {oid}, which {p.name} does not define")
         otype = obj.get("type", "model")
         if otype == "other":
-            self.rules.violation(
-                f"{p.name}: the build outputs object {oid}, of type 'other'; build items must not reference objects "
-                "of type other, directly or through components (core 3.4.3.1): change its type or remove the item")
+            self.rules.object_type_other(p.name, oid)
             return
         if oid in p.meshes:
             V, F, props = p.meshes[oid]
