@@ -49,6 +49,7 @@ from saucerfab.check.readers.safe import (
     TextureBudget,
     parse_xml,
     probe_texture,
+    read_texture_entry,
     zip_join,
 )
 from saucerfab.check.readers.threemf_blocks import Block, fast_blocks
@@ -413,12 +414,9 @@ class _Reader:
             if target is None:
                 return TextureInfo(name=path, status="unsafe_path" if path else "missing",
                                    message=f"texture2d {texid} path {path!r} is empty or escapes the archive")
-            if not self.zf.has(target):
-                return TextureInfo(name=path, status="missing", message=f"texture {path!r} is not in the archive")
-            try:
-                data = self.zf.read(target, self.limits.max_texture_bytes, "texture")
-            except ReadError as exc:
-                return TextureInfo(name=path, status="too_large", message=exc.message)
+            data = read_texture_entry(self.zf, target, path, self.limits, damaged="too_large")
+            if isinstance(data, TextureInfo):
+                return data
             if data[:5] == CIPHER_MAGIC or target.lower() in self.rules.package.encrypted:
                 return TextureInfo(name=path, status="unreadable",
                                    message=f"texture {path!r} is encrypted (3MF Secure Content); the checker cannot "
