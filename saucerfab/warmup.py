@@ -14,7 +14,7 @@ import time
 
 def warm_up_check() -> list[str]:
     """Compile the checker's numba kernels (large meshes, meshopt, the OBJ and 3MF bulk parsers); return their names."""
-    from saucerfab.check.kernels import warm_up as kernels_warm_up
+    from saucerfab.check.kernels_warmup import warm_up as kernels_warm_up
     from saucerfab.check.readers.meshopt import warm_up as meshopt_warm_up
     from saucerfab.check.readers.obj_fast import warm_up as obj_warm_up
     from saucerfab.check.readers.threemf_fast import warm_up as threemf_warm_up

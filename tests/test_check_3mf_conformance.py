@@ -245,7 +245,7 @@ def test_200000_nested_elements_are_refused_before_parsing_and_fast(tmp_path: Pa
 
 
 def test_xml_depth_scan_counts_like_a_parser() -> None:
-    from saucerfab.check.readers.threemf_rules import xml_too_deep
+    from saucerfab.check.readers.xmlscan import xml_too_deep
 
     deep = b"<?xml version='1.0'?><!-- <a><a><a> --><r>" + b"<a k='x'>" * 70 + b"<b/>" * 500 + b"</a>" * 70 + b"</r>"
     assert xml_too_deep(deep, 64) == 71

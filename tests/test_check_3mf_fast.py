@@ -22,7 +22,7 @@ import pytest
 from saucerfab.check.limits import DEFAULT_LIMITS, Limits
 from saucerfab.check.meshdata import ReadError
 from saucerfab.check.readers import read_mesh
-from saucerfab.check.readers import threemf as T
+from saucerfab.check.readers import threemf_blocks as T
 from saucerfab.check.readers import threemf_fast as F
 
 TAGS = {"vertices": b"vertex", "triangles": b"triangle", "tex2coord": b"m:tex2coord"}

@@ -15,6 +15,7 @@ the tests.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -23,6 +24,15 @@ import numpy as np
 #: meshes with at least this many triangles use the numba kernels of :mod:`saucerfab.check.kernels`
 #: (importing numba costs ~0.7 s of start-up: below this, numpy is done sooner)
 FAST_FROM_TRIANGLES = 200_000
+
+
+def query_workers() -> int:
+    """Threads for the numpy-heavy queries (rays, pair tests): the cores this process may use, at most 4."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        n = os.cpu_count() or 1
+    return max(1, min(4, n))
 
 
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -19,6 +19,7 @@ HELP = "ray-trace an export folder's files and score what the viewer sees agains
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from saucerfab.cli.schema_flag import add_schema_flag
     from saucerfab.verify.core import (
         DEFAULT_MIN_COVERAGE,
         DEFAULT_MIN_PSNR_DB,
@@ -43,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="render only the first of OBJ, 3MF, GLB (the others are rendered from the design eye by default)")
     p.add_argument("-o", "--out", metavar="DIR", help="where to write the pictures and verify.json (default PRINT_DIR/verify)")
     p.add_argument("--json", action="store_true", help="print the saucerfab.verify/1 JSON document on stdout")
-    p.add_argument("--schema", action="store_true", help="print the JSON Schema of --json output and exit")
+    add_schema_flag(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
 
 
@@ -70,16 +71,14 @@ def print_scores(result, out=None) -> None:  # type: ignore[no-untyped-def]
 def run(args: argparse.Namespace) -> int:
     import json
 
+    from saucerfab.cli.schema_flag import schema_asked
     from saucerfab.errors import ConfigError
     from saucerfab.fileio import atomic_dir
     from saucerfab.verify import parse_eyes, verify_print
     from saucerfab.verify.schema import JSON_SCHEMA
 
-    if args.schema:
-        print(json.dumps(JSON_SCHEMA, indent=2))
+    if schema_asked(args, JSON_SCHEMA, args.folder, "give the print folder to verify: saucerfab verify PRINT_DIR"):
         return 0
-    if not args.folder:
-        raise ConfigError("give the print folder to verify: saucerfab verify PRINT_DIR")
     eyes = parse_eyes(args.eyes, args.ipd_mm)
     folder = Path(args.folder)
     out = Path(args.out) if args.out else folder / "verify"

@@ -13,15 +13,12 @@ from saucerfab.verify.core import (
     DEFAULT_MIN_PSNR_DB,
     DEFAULT_RES,
     DEFAULT_SPP,
-    SCHEMA,
-    FileScore,
-    VerifyResult,
-    ViewScore,
     stand_sentence,
     verify_print,
 )
 from saucerfab.verify.eyes import EyeSpec, parse_eyes
 from saucerfab.verify.printfolder import VerifyInputError, reference_name
+from saucerfab.verify.results import SCHEMA, FileScore, VerifyResult, ViewScore
 
 __all__ = [
     "DEFAULT_MIN_COVERAGE",

@@ -26,15 +26,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from saucerfab import __version__
 from saucerfab.errors import ConfigError
-from saucerfab.verify.eyes import Eye, EyeSpec, eye_positions
+from saucerfab.verify.eyes import EyeSpec, eye_positions
 from saucerfab.verify.metrics import best_shift, psnr, shifted, ssim
 from saucerfab.verify.printfolder import (
     PrintScene,
@@ -44,8 +42,8 @@ from saucerfab.verify.printfolder import (
     load_references,
     read_surface,
 )
+from saucerfab.verify.results import FileScore, VerifyResult, ViewScore
 
-SCHEMA = "saucerfab.verify/1"
 #: default pass level per view, dB: a picture at 20 dB is plainly recognisable
 #: with visible flaws; graphic designs print at 30 dB and more from the design eye
 DEFAULT_MIN_PSNR_DB = 20.0
@@ -62,134 +60,6 @@ MAX_SPP = 1024
 
 #: progress(message, fraction done in [0, 1])
 Progress = Callable[[str, float], None]
-
-
-@dataclass
-class ViewScore:
-    """One view of one file from one eye.
-
-    Attributes:
-        view: ``direct``, ``reflected`` or ``reflected2``.
-        eye: the eye's name.
-        psnr_db: PSNR after the shift (none from the design eye), dB; NaN if nothing is seen.
-        psnr_unshifted_db: PSNR without any shift, dB.
-        ssim: mean SSIM over the compared pixels, after the shift.
-        coverage: share of the frame where the saucer is seen in this view.
-        pixels: pixels compared.
-        shift_px: (dx, dy) the reference was moved (right, down) to match.
-        passed: psnr and coverage at least the levels asked for.
-        picture: the side-by-side picture's file name, if written.
-    """
-
-    view: str
-    eye: str
-    psnr_db: float
-    psnr_unshifted_db: float
-    ssim: float
-    coverage: float
-    pixels: int
-    shift_px: tuple[int, int]
-    passed: bool
-    picture: str | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        def num(v: float, nd: int) -> float | None:
-            return None if not math.isfinite(v) else round(float(v), nd)
-
-        return {
-            "view": self.view,
-            "eye": self.eye,
-            "psnr_db": num(self.psnr_db, 2),
-            "psnr_unshifted_db": num(self.psnr_unshifted_db, 2),
-            "ssim": num(self.ssim, 4),
-            "coverage": round(float(self.coverage), 4),
-            "pixels": int(self.pixels),
-            "shift_px": [int(self.shift_px[0]), int(self.shift_px[1])],
-            "passed": bool(self.passed),
-            "picture": self.picture,
-        }
-
-
-@dataclass
-class FileScore:
-    """The scores of one rendered file."""
-
-    path: Path
-    format: str
-    views: list[ViewScore] = field(default_factory=list)
-
-    def to_dict(self) -> dict[str, Any]:
-        # the file's name: it lies in the verified folder, which may be moved or sent on
-        return {"path": self.path.name, "format": self.format, "views": [v.to_dict() for v in self.views]}
-
-
-@dataclass
-class VerifyResult:
-    """What :func:`verify_print` found.
-
-    Attributes:
-        folder: the print folder.
-        files: one entry per rendered file, the primary (fully rendered) first.
-        eyes: every eye rendered (the design eye first).
-        where_to_stand: the design eye relative to the cup (see :func:`where_to_stand`).
-        res, spp: render size (pixels per side) and samples per pixel.
-        min_psnr_db, min_coverage: the pass levels.
-        passed: every view of every file from every eye passed.
-        seconds: wall time of the whole verification.
-        pictures_dir: where the pictures were written, or None.
-        renderer: name, version and variant of the renderer.
-        renders: the primary file's renders for reports and tests: (eye, view) -> (S, S, 3)
-            rgb, and (eye, view + ":region") -> (S, S) bool, the pixels compared.
-    """
-
-    folder: Path
-    files: list[FileScore]
-    eyes: list[Eye]
-    where_to_stand: dict[str, Any]
-    res: int
-    spp: int
-    min_psnr_db: float
-    min_coverage: float
-    passed: bool
-    seconds: float
-    pictures_dir: Path | None
-    renderer: dict[str, str]
-    renders: dict[tuple[str, str], np.ndarray] = field(default_factory=dict, repr=False)
-
-    @property
-    def exit_code(self) -> int:
-        return 0 if self.passed else 1
-
-    def score(self, view: str, eye: str = "design") -> ViewScore | None:
-        """The primary file's score of ``view`` from ``eye``."""
-        for v in self.files[0].views if self.files else []:
-            if v.view == view and v.eye == eye:
-                return v
-        return None
-
-    def to_dict(self, *, record_times: bool = True) -> dict[str, Any]:
-        """JSON-ready, schema ``saucerfab.verify/1``; without times when ``record_times`` is False."""
-        d = {
-            "schema": SCHEMA,
-            "saucerfab_version": __version__,
-            "folder": str(self.folder),
-            "renderer": dict(self.renderer),
-            "res": self.res,
-            "spp": self.spp,
-            "min_psnr_db": self.min_psnr_db,
-            "min_coverage": self.min_coverage,
-            "passed": self.passed,
-            "exit_code": self.exit_code,
-            "eyes": [
-                {"name": e.name, "position_mm": [round(c, 3) for c in e.position], "offset_mm": list(e.offset_mm)}
-                for e in self.eyes
-            ],
-            "where_to_stand": self.where_to_stand,
-            "files": [f.to_dict() for f in self.files],
-        }
-        if record_times:
-            d["seconds"] = round(self.seconds, 2)
-        return d
 
 
 def where_to_stand(scene: PrintScene) -> dict[str, Any]:

@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from saucerfab.verify.core import ViewScore
+from saucerfab.verify.results import ViewScore
 
 #: absolute difference (mean over RGB, sRGB units) shown at the top of the heat map's scale
 HEAT_MAX = 0.5

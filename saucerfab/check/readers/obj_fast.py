@@ -143,6 +143,24 @@ def count_statements(a: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _digits(a: np.ndarray, cls: np.ndarray, i: int, e: int, m: np.uint64, nd: int,
+            ndig: int) -> tuple[int, np.uint64, int, int]:
+    """The decimal digits from a[i] (before e) appended to the significand ``m``, leading zeros skipped.
+
+    Returns (the position after them, m, significant digits in m, digits read in all); ``nd`` and
+    ``ndig`` are the counts so far.
+    """
+    while i < e and cls[a[i]] == 1:
+        d = a[i] - 48
+        if nd > 0 or d != 0:
+            m = m * np.uint64(10) + np.uint64(d)
+            nd += 1
+        ndig += 1
+        i += 1
+    return i, m, nd, ndig
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _number(a: np.ndarray, cls: np.ndarray, s: int, e: int, pow10: np.ndarray) -> tuple[int, float]:
     """Token a[s:e]: (1, value) exactly as float() reads it, (2, 0) for numpy to convert, or (0, 0): bail out."""
     hard = False
@@ -159,27 +177,13 @@ def _number(a: np.ndarray, cls: np.ndarray, s: int, e: int, pow10: np.ndarray) -
     if cls[a[i]] == 3:
         neg = a[i] == 45
         i += 1
-    m = np.uint64(0)
-    nd = 0  # significant digits in m
-    ndig = 0  # digits in all
+    # m: the significand; nd: its significant digits; ndig: digits in all
+    i, m, nd, ndig = _digits(a, cls, i, e, np.uint64(0), 0, 0)
     scale = 0
-    while i < e and cls[a[i]] == 1:
-        d = a[i] - 48
-        if nd > 0 or d != 0:
-            m = m * np.uint64(10) + np.uint64(d)
-            nd += 1
-        ndig += 1
-        i += 1
     if i < e and cls[a[i]] == 2:
-        i += 1
-        while i < e and cls[a[i]] == 1:
-            d = a[i] - 48
-            if nd > 0 or d != 0:
-                m = m * np.uint64(10) + np.uint64(d)
-                nd += 1
-            ndig += 1
-            scale -= 1
-            i += 1
+        i, m, nd, ndig_all = _digits(a, cls, i + 1, e, m, nd, ndig)
+        scale = ndig - ndig_all  # one decimal place down per digit after the point
+        ndig = ndig_all
     if ndig == 0 or nd > 19:
         return 2, 0.0
     if i < e:

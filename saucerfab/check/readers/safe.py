@@ -474,6 +474,25 @@ class DiskResources(Resources):
         return read_file_bounded(p, cap, what)
 
 
+def read_texture_entry(zf: SafeZip, target: str, name: str, limits: Limits, *,
+                       damaged: str = "unreadable") -> bytes | TextureInfo:
+    """The bytes of archive entry ``target``, a texture its model calls ``name``, or a TextureInfo saying why not.
+
+    Never raises: an entry that is not there is ``missing``; one that
+    inflates past ``Limits.max_texture_bytes`` or the archive's budget is
+    ``too_large``; one that cannot be read (damaged, encrypted) gets the
+    status ``damaged`` (the 3MF reader has always reported those as
+    ``too_large``).
+    """
+    if not zf.has(target):
+        return TextureInfo(name=name, status="missing", message=f"texture {name!r} is not in the archive")
+    try:
+        return zf.read(target, limits.max_texture_bytes, "texture")
+    except ReadError as exc:
+        return TextureInfo(name=name, status="too_large" if exc.code == "archive_too_large" else damaged,
+                           message=exc.message)
+
+
 class ZipResources(Resources):
     """References resolved beside an entry inside an archive (a zipped OBJ + MTL + PNG)."""
 
@@ -488,13 +507,9 @@ class ZipResources(Resources):
         if target is None or is_unsafe_relpath(ref.lstrip("/")):
             return TextureInfo(name=ref, status="unsafe_path",
                                message=f"texture path {ref!r} is absolute or leaves the archive folder; not read")
-        if not self.zf.has(target):
-            return TextureInfo(name=ref, status="missing", message=f"texture {ref!r} is not in the archive")
-        try:
-            data = self.zf.read(target, self.limits.max_texture_bytes, "texture")
-        except ReadError as exc:
-            return TextureInfo(name=ref, status="too_large" if exc.code == "archive_too_large" else "unreadable",
-                               message=exc.message)
+        data = read_texture_entry(self.zf, target, ref, self.limits)
+        if isinstance(data, TextureInfo):
+            return data
         return probe_texture(ref, data, self.limits, budget=self.budget)
 
     def read(self, ref: str, cap: int, what: str) -> bytes:

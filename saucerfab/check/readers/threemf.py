@@ -7,14 +7,10 @@ everything an archive can claim and must see the colour data:
   (entry count, names, inflation budget);
 * XML goes through defusedxml with DTDs forbidden;
 * ``<vertices>``, ``<triangles>`` and ``<m:texture2dgroup>`` contents - the
-  bulk of any real model - take a fast path: when a block matches a strict
-  grammar (only ``<vertex x= y= z=/>`` elements with plain numeric values,
-  double quotes, XML whitespace; no comments, entities or CDATA), its
-  numbers are read with numpy, and the block is replaced by a marker element
-  before the rest of the document is parsed by defusedxml. A block that
-  matches the grammar means exactly what an XML parser would read from it,
-  so this changes speed, not meaning; anything else takes the ordinary
-  element-by-element path;
+  bulk of any real model - take a fast path (:mod:`.threemf_blocks`): a
+  block that matches a strict grammar is read with numpy and replaced by a
+  marker element before defusedxml parses the rest; it means exactly what
+  an XML parser would read from it, so this changes speed, not meaning;
 * components and build items are instanced with their transforms, with the
   nesting depth, part count and instanced triangle count bounded before
   arrays are made (a small mesh instanced a million times is refused);
@@ -40,9 +36,7 @@ run by :func:`saucerfab.check.check_mesh`).
 
 from __future__ import annotations
 
-import re
 import secrets
-import sys
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -55,280 +49,21 @@ from saucerfab.check.readers.safe import (
     TextureBudget,
     parse_xml,
     probe_texture,
+    read_texture_entry,
     zip_join,
 )
-from saucerfab.check.readers.threemf_rules import (
-    CIPHER_MAGIC,
-    NS_CORE,
-    NS_MAT,
-    NS_PROD,
-    Rules,
-    declared_encoding,
-    root_namespaces,
-    xml_too_deep,
-)
+from saucerfab.check.readers.threemf_blocks import Block, fast_blocks
+from saucerfab.check.readers.threemf_grammar import TRI_ATTR_ORDER
+from saucerfab.check.readers.threemf_resources import check_resources
+from saucerfab.check.readers.threemf_rules import Rules
+from saucerfab.check.readers.threemf_spec import CIPHER_MAGIC
+from saucerfab.check.readers.threemf_spec import C as _C
+from saucerfab.check.readers.threemf_spec import M as _M  # M alone is a transform matrix in this module
+from saucerfab.check.readers.threemf_spec import P as _P
+from saucerfab.check.readers.xmlscan import declared_encoding, root_namespaces, xml_too_deep
 
 #: millimetres per 3MF unit
 UNITS_MM = {"micron": 0.001, "millimeter": 1.0, "centimeter": 10.0, "inch": 25.4, "foot": 304.8, "meter": 1000.0}
-
-_C = "{%s}" % NS_CORE
-_M = "{%s}" % NS_MAT
-_P = "{%s}" % NS_PROD
-
-# -- fast path ----------------------------------------------------------------
-
-_WS = rb"[ \t\r\n]"
-_NAME = rb"([A-Za-z][A-Za-z0-9]*)="
-_TRI_ATTR_ORDER = (b"v1", b"v2", b"v3", b"pid", b"p1", b"p2", b"p3")
-_BLOCK_START = re.compile(
-    rb"<(vertices|triangles)>|<([A-Za-z_][A-Za-z0-9_.-]*:)?texture2dgroup(" + _WS + rb'[^<>]*)?(?<!/)>'
-)
-_ATTR = re.compile(_WS + rb"+" + _NAME)
-_END = re.compile(_WS + rb"*/>" + _WS + rb"*")
-_ELEMENT_RES: dict[bytes, tuple[re.Pattern[bytes], re.Pattern[bytes]]] = {}
-
-
-def _element_res(tag: bytes) -> tuple[re.Pattern[bytes], re.Pattern[bytes]]:
-    """(first element's opening up to its first attribute name, the same after a previous element's '/>')."""
-    res = _ELEMENT_RES.get(tag)
-    if res is None:
-        t = re.escape(tag)
-        res = (re.compile(_WS + rb"*<" + t + _WS + rb"+" + _NAME),
-               re.compile(_WS + rb"*/>" + _WS + rb"*<" + t + _WS + rb"+" + _NAME))
-        _ELEMENT_RES[tag] = res
-    return res
-
-
-def _split_elements(content: bytes, tag: bytes) -> tuple[list[bytes], list[bytes]] | None:
-    """Attribute values and names of a block made only of ``<tag a="..." b="..."/>`` elements.
-
-    Every element must carry the same attributes in the same order, with
-    double quotes and XML whitespace; then splitting at the quotes gives
-    separators and values, and the separators take only a handful of
-    distinct forms, each checked against the grammar once. Anything else
-    (comments, CDATA, entities, other elements, varying attributes) returns
-    None and the block is left to the XML parser.
-    """
-    parts = content.split(b'"')
-    if len(parts) % 2 == 0:
-        return None
-    seps, vals = parts[0::2], parts[1::2]
-    if not vals:
-        return ([], []) if not content.strip(b" \t\r\n") else None
-    first_re, next_re = _element_res(tag)
-    m = first_re.fullmatch(seps[0])
-    if m is None:
-        return None
-    names = [m.group(1)]
-    k = 1
-    while k < len(seps) - 1:
-        a = _ATTR.fullmatch(seps[k])
-        if a is None:
-            break
-        names.append(a.group(1))
-        k += 1
-    n = len(vals) // k
-    if n * k != len(vals) or len(set(names)) != k or _END.fullmatch(seps[-1]) is None:
-        return None
-    for sep in set(seps[k : n * k : k]):
-        m = next_re.fullmatch(sep)
-        if m is None or m.group(1) != names[0]:
-            return None
-    for j in range(1, k):
-        for sep in set(seps[j : n * k : k]):
-            a = _ATTR.fullmatch(sep)
-            if a is None or a.group(1) != names[j]:
-                return None
-    return vals, names
-
-
-@dataclass
-class _Block:
-    kind: str  # vertices | triangles | tex2coord
-    values: Any  # ndarray, or (ndarray tri, tuple names) for triangles
-
-
-def _fast_blocks(data: bytes, marker_ns: str, limits: Limits) -> tuple[bytes, list[_Block]]:
-    """Cut strictly-formed bulk blocks out of ``data``; return the skeleton and the parsed blocks.
-
-    Element counts are bounded before any block's numbers are converted: a
-    part may define objects it never instances, so the instancing caps alone
-    would not bound this allocation.
-    """
-    pieces: list[bytes] = []
-    blocks: list[_Block] = []
-    pos = 0
-    n_vert = n_tri = 0
-    at = 0
-    fast = _use_fast(len(data))
-    while (m := _BLOCK_START.search(data, at)) is not None:  # from the last block's end: blocks are not rescanned
-        start = at = m.end()
-        if m.group(1) is not None:
-            kind = m.group(1).decode()
-            end = data.find(b"</" + m.group(1) + b">", start)
-        else:
-            kind = "tex2coord"
-            prefix = m.group(2) or b""
-            end = data.find(b"</" + prefix + b"texture2dgroup>", start)
-        if end < 0:
-            continue
-        content = data[start:end]
-        if kind == "vertices":
-            n_vert += content.count(b"<vertex")
-        elif kind == "triangles":
-            n_tri += content.count(b"<triangle")
-        else:
-            n_vert += content.count(b"tex2coord")
-        if n_vert > limits.max_vertices or n_tri > limits.max_triangles:
-            raise ReadError(
-                "over_check_limit",
-                f"the 3MF model lists over {limits.max_vertices:,} vertices/coordinates or "
-                f"{limits.max_triangles:,} triangles, the checker's limits (Limits.max_vertices, "
-                "Limits.max_triangles; --max-triangles raises the latter)",
-            )
-        parsed = _parse_block(kind, content, m.group(2) or b"", fast)
-        if parsed is None:
-            continue
-        pieces.append(data[pos:start])
-        pieces.append(b'<sfblk xmlns="%s" i="%d"/>' % (marker_ns.encode(), len(blocks)))
-        blocks.append(_Block(kind, parsed))
-        pos = at = end
-    if not blocks:
-        return data, []
-    pieces.append(data[pos:])
-    return b"".join(pieces), blocks
-
-
-def _uniform_spans(content: bytes, tag: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[bytes]] | None:
-    """Value spans of a block of identically formatted ``<tag a="..." .../>`` elements, checked with numpy.
-
-    The common case of one writer's output: every separator between values
-    at the same attribute slot is the same bytes. Each distinct separator is
-    checked once against the grammar, and all others are compared to it as
-    byte arrays, with no Python object per value. Returns (bytes, value
-    starts, value ends, attribute names), or None to use the general path.
-    """
-    buf = np.frombuffer(content, np.uint8)
-    q = np.flatnonzero(buf == 34)  # '"'
-    if len(q) == 0 or len(q) % 2:
-        return None
-    st, en = q[0::2] + 1, q[1::2]
-    nv = len(st)
-    sep_st = np.concatenate([[0], en[:-1] + 1])  # separator before value i: [sep_st[i], st[i] - 1)
-    sep_en = st - 1
-    first_re, next_re = _element_res(tag)
-    m = first_re.fullmatch(content[: q[0]])
-    if m is None:
-        return None
-    names = [m.group(1)]
-    k = 1
-    while k < nv:
-        a = _ATTR.fullmatch(content[sep_st[k] : sep_en[k]])
-        if a is None:
-            break
-        names.append(a.group(1))
-        k += 1
-    n = nv // k
-    if n * k != nv or len(set(names)) != k or _END.fullmatch(content[int(en[-1]) + 1 :]) is None:
-        return None
-    for j in range(k):
-        idx = np.arange(j, nv, k)[1:] if j == 0 else np.arange(j, nv, k)
-        if not len(idx):
-            continue
-        s0, ln = sep_st[idx], sep_en[idx] - sep_st[idx]
-        width = int(ln[0])
-        if (ln != width).any():
-            return None  # formatting varies: the general path checks each distinct separator
-        rep = content[int(s0[0]) : int(s0[0]) + width]
-        mm = (next_re if j == 0 else _ATTR).fullmatch(rep)
-        if mm is None or mm.group(1) != names[j]:
-            return None
-        for c in range(width):  # column by column: O(values) memory
-            if (buf[s0 + c] != rep[c]).any():
-                return None
-    return buf, st, en, names
-
-
-def _span_ints(buf: np.ndarray, st: np.ndarray, en: np.ndarray) -> np.ndarray | None:
-    """Non-negative decimal integers in the spans (Horner's rule column by column), or None."""
-    ln = en - st
-    if len(ln) and (ln.min() < 1 or ln.max() > 18):
-        return None
-    acc = np.zeros(len(st), dtype=np.int64)
-    for c in range(int(ln.max()) if len(ln) else 0):
-        live = c < ln
-        d = buf[np.where(live, st + c, 0)].astype(np.int64) - 48
-        if ((d < 0) | (d > 9))[live].any():
-            return None
-        acc = np.where(live, acc * 10 + d, acc)
-    return acc
-
-
-#: a model part at least this long has its blocks of FAST_3MF_BLOCK_BYTES or more offered to the numba
-#: parser (threemf_fast) first: importing numba and its first call cost ~1.1 s, what the code below spends
-#: on ~25 MB of blocks (and check_mesh loads numba itself from ~200k triangles). Once that parser is loaded
-#: in the process, any part's blocks are offered to it.
-FAST_3MF_PART_BYTES = 24 << 20
-FAST_3MF_BLOCK_BYTES = 256 << 10
-
-
-def _use_fast(part_bytes: int) -> bool:
-    loaded = sys.modules.get("saucerfab.check.readers.threemf_fast")
-    return part_bytes >= FAST_3MF_PART_BYTES or (loaded is not None and loaded.ready())
-
-
-def _parse_block(kind: str, content: bytes, prefix: bytes, fast: bool = False) -> Any:
-    """The numbers of one bulk block, or None to leave it to the XML parser (``fast``: try threemf_fast first)."""
-    if fast and len(content) >= FAST_3MF_BLOCK_BYTES:
-        from saucerfab.check.readers.threemf_fast import parse_block as parse_fast
-
-        got = parse_fast(kind, content, prefix)  # None where it leaves the block to the code below
-        if got is not None:
-            return got
-    if b"&" in content or b"<!" in content or b"<?" in content:
-        return None
-    tag = {"vertices": b"vertex", "triangles": b"triangle", "tex2coord": prefix + b"tex2coord"}[kind]
-    fast = _uniform_spans(content, tag)
-    if fast is not None:
-        buf, st, en, names = fast
-        want = {"vertices": [b"x", b"y", b"z"], "tex2coord": [b"u", b"v"]}.get(kind)
-        if want is not None:
-            if sorted(names) == want:
-                try:  # the structure is checked; the values between the quotes are all that is left
-                    arr = np.array(content.split(b'"')[1::2], dtype=np.float64).reshape(-1, len(want))
-                except ValueError:
-                    return None
-                return arr[:, [names.index(c) for c in want]]
-        elif set(names) <= set(_TRI_ATTR_ORDER) and {b"v1", b"v2", b"v3"} <= set(names):
-            ints = _span_ints(buf, st, en)
-            if ints is not None:
-                return ints.reshape(-1, len(names)), tuple(names)
-    split = _split_elements(content, tag)
-    if split is None:
-        return None
-    vals, names = split
-    try:
-        if kind == "vertices":
-            if sorted(names) != [b"x", b"y", b"z"] and names:
-                return None
-            arr = np.array(vals, dtype=np.float64).reshape(-1, 3)
-            return arr[:, [names.index(c) for c in (b"x", b"y", b"z")]] if names else arr
-        if kind == "tex2coord":
-            if sorted(names) != [b"u", b"v"] and names:
-                return None
-            arr = np.array(vals, dtype=np.float64).reshape(-1, 2)
-            return arr[:, [names.index(c) for c in (b"u", b"v")]] if names else arr
-        if names and (not set(names) <= set(_TRI_ATTR_ORDER) or not {b"v1", b"v2", b"v3"} <= set(names)):
-            return None
-        if any(c not in b"0123456789" for v in vals[:1] for c in v):
-            return None  # integers only (no sign, no spaces); checked on one value, numpy checks the rest
-        arr = np.array(vals, dtype=np.int64).reshape(-1, max(len(names), 1))
-    except (ValueError, OverflowError):
-        return None  # not plain numbers: the XML path reports it properly
-    if arr.size and arr.min() < 0:
-        return None
-    return arr, tuple(names)
-
 
 # -- model structure ------------------------------------------------------------
 
@@ -412,7 +147,7 @@ class _Reader:
         raw = self.zf.read(name, self.limits.max_xml_bytes, "model part")
         self.rules.check_encrypted(name, raw)
         self.rules.xml_prolog(raw, name)
-        skeleton, blocks = _fast_blocks(raw, self.marker_ns, self.limits)
+        skeleton, blocks = fast_blocks(raw, self.marker_ns, self.limits)
         depth = xml_too_deep(skeleton, self.limits.max_xml_depth)
         if depth is not None:
             raise ReadError(
@@ -438,10 +173,10 @@ class _Reader:
         self._index(p, root, blocks)
         res = root.find(_C + "resources")
         if res is not None:
-            self.rules.resources(p, res)
+            check_resources(self.rules, p, res)
         return p
 
-    def _block(self, el: Any, blocks: list[_Block], kind: str) -> Any:
+    def _block(self, el: Any, blocks: list[Block], kind: str) -> Any:
         """The fast-path block standing in ``el``, if any."""
         if len(el) == 1 and el[0].tag == "{%s}sfblk" % self.marker_ns:
             blk = blocks[int(el[0].get("i"))]
@@ -449,7 +184,7 @@ class _Reader:
                 return blk.values
         return None
 
-    def _index(self, p: _Part, root: Any, blocks: list[_Block]) -> None:
+    def _index(self, p: _Part, root: Any, blocks: list[Block]) -> None:
         res = root.find(_C + "resources")
         if res is not None:
             for el in res:
@@ -498,7 +233,7 @@ class _Reader:
             if mesh is not None:
                 p.meshes[oid] = self._mesh(p, oid, mesh, blocks)
 
-    def _mesh(self, p: _Part, oid: int, mesh: Any, blocks: list[_Block]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    def _mesh(self, p: _Part, oid: int, mesh: Any, blocks: list[Block]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         what = f"object {oid} in {p.name}"
         vel = mesh.find(_C + "vertices")
         tel = mesh.find(_C + "triangles")
@@ -515,13 +250,13 @@ class _Reader:
             vals, names = tri
             T = np.full((len(vals), 7), -1, dtype=np.int64)
             for j, n in enumerate(names):
-                T[:, _TRI_ATTR_ORDER.index(n)] = vals[:, j]
+                T[:, TRI_ATTR_ORDER.index(n)] = vals[:, j]
         else:
             kids = [] if tel is None else [c for c in tel if c.tag == _C + "triangle"]
             self.b.reserve(0, len(kids), what)
             try:
                 T = np.array(
-                    [[c.get(n.decode(), "-1") for n in _TRI_ATTR_ORDER] for c in kids], dtype=np.int64
+                    [[c.get(n.decode(), "-1") for n in TRI_ATTR_ORDER] for c in kids], dtype=np.int64
                 ).reshape(-1, 7)
             except (TypeError, ValueError, OverflowError):
                 raise ReadError("malformed", f"{what}: a triangle has a non-integer index") from None
@@ -600,9 +335,7 @@ class _Reader:
             raise ReadError("malformed", f"3MF refers to object {oid}, which {p.name} does not define")
         otype = obj.get("type", "model")
         if otype == "other":
-            self.rules.violation(
-                f"{p.name}: the build outputs object {oid}, of type 'other'; build items must not reference objects "
-                "of type other, directly or through components (core 3.4.3.1): change its type or remove the item")
+            self.rules.object_type_other(p.name, oid)
             return
         if oid in p.meshes:
             V, F, props = p.meshes[oid]
@@ -681,12 +414,9 @@ class _Reader:
             if target is None:
                 return TextureInfo(name=path, status="unsafe_path" if path else "missing",
                                    message=f"texture2d {texid} path {path!r} is empty or escapes the archive")
-            if not self.zf.has(target):
-                return TextureInfo(name=path, status="missing", message=f"texture {path!r} is not in the archive")
-            try:
-                data = self.zf.read(target, self.limits.max_texture_bytes, "texture")
-            except ReadError as exc:
-                return TextureInfo(name=path, status="too_large", message=exc.message)
+            data = read_texture_entry(self.zf, target, path, self.limits, damaged="too_large")
+            if isinstance(data, TextureInfo):
+                return data
             if data[:5] == CIPHER_MAGIC or target.lower() in self.rules.package.encrypted:
                 return TextureInfo(name=path, status="unreadable",
                                    message=f"texture {path!r} is encrypted (3MF Secure Content); the checker cannot "

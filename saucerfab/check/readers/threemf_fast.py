@@ -1,10 +1,10 @@
-"""numba parser for large 3MF bulk blocks: the fast path of :func:`saucerfab.check.readers.threemf._parse_block`.
+"""numba parser for large 3MF bulk blocks: the fast path of :func:`saucerfab.check.readers.threemf_blocks._parse_block`.
 
-The numpy code in :mod:`saucerfab.check.readers.threemf` (``_uniform_spans``,
+The numpy code in :mod:`saucerfab.check.readers.threemf_blocks` (``_uniform_spans``,
 ``_span_ints``, ``_split_elements``) is the reference and reads small blocks
 (importing numba costs about 0.7 s). A ``<vertices>``, ``<triangles>`` or
 ``<m:texture2dgroup>`` block of at least
-:data:`saucerfab.check.readers.threemf.FAST_3MF_BLOCK_BYTES` is offered to
+:data:`saucerfab.check.readers.threemf_blocks.FAST_3MF_BLOCK_BYTES` is offered to
 :func:`parse_block` first, which reads it in one pass over the bytes if it is
 exactly the reference's grammar, element after element::
 
@@ -23,7 +23,7 @@ CDATA, single quotes, a blank inside a value, a missing or extra attribute,
 a value numpy cannot read - returns ``None``, and the reference reads the
 block, so its answers (and its verdicts) are the reference's.
 
-The element count is bounded before this is called (``_fast_blocks`` checks
+The element count is bounded before this is called (``fast_blocks`` checks
 it against ``Limits``); the arrays made here are sized by the count of
 ``<tag`` in the block, which that check bounds.
 """
@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 from saucerfab.check.readers.obj_fast import _CLS, _POW10, _grow, _number
-from saucerfab.check.readers.threemf import _ATTR, _TRI_ATTR_ORDER, _element_res
+from saucerfab.check.readers.threemf_grammar import ATTR, TRI_ATTR_ORDER, element_res
 
 _WANT = {"vertices": (b"x", b"y", b"z"), "tex2coord": (b"u", b"v")}
 
@@ -131,7 +131,7 @@ def scan(a: np.ndarray, tag: np.ndarray, names: np.ndarray, name_off: np.ndarray
 
 def _names(content: bytes, tag: bytes) -> list[bytes] | None:
     """The first element's attribute names, found as the reference finds them (its regexes), or None."""
-    first_re, _ = _element_res(tag)
+    first_re, _ = element_res(tag)
     q = content.find(b'"')
     if q < 0:
         return None
@@ -140,11 +140,11 @@ def _names(content: bytes, tag: bytes) -> list[bytes] | None:
         return None
     names = [m.group(1)]
     close = content.find(b'"', q + 1)
-    while close >= 0 and len(names) <= len(_TRI_ATTR_ORDER):
+    while close >= 0 and len(names) <= len(TRI_ATTR_ORDER):
         q = content.find(b'"', close + 1)
         if q < 0:
             break
-        a = _ATTR.fullmatch(content, close + 1, q)
+        a = ATTR.fullmatch(content, close + 1, q)
         if a is None:
             break
         names.append(a.group(1))
@@ -168,12 +168,12 @@ def parse_block(kind: str, content: bytes, prefix: bytes) -> Any:
             return None
         col = np.array([want.index(c) for c in names], dtype=np.int64)
     else:
-        if not set(names) <= set(_TRI_ATTR_ORDER) or not {b"v1", b"v2", b"v3"} <= set(names):
+        if not set(names) <= set(TRI_ATTR_ORDER) or not {b"v1", b"v2", b"v3"} <= set(names):
             return None
         col = np.arange(len(names), dtype=np.int64)
     k = len(names)
     # rows for the most elements the bytes can hold (the shortest element has one-byte values); pages never
-    # written are never touched, and the arrays are cut to the elements read (_fast_blocks has bounded
+    # written are never touched, and the arrays are cut to the elements read (fast_blocks has bounded
     # their count against Limits)
     cap = len(content) // (3 + len(tag) + sum(len(x) + 5 for x in names)) + 1
     ints = want is None
