@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from saucerfab.cli.schema_flag import add_schema_flag, schema_asked
 from saucerfab.formats import READERS, labels
 
 HELP = f"check mesh files ({labels(READERS.values())}) for printability; exit 0/1/2"
@@ -27,7 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="refuse files over N triangles (default 5,000,000) as too large to check")
     p.add_argument("--min-wall", type=float, metavar="MM",
                    help="warn about walls under MM when no --printer gives a minimum")
-    p.add_argument("--schema", action="store_true", help="print the JSON Schema of --json output and exit")
+    add_schema_flag(p)
 
 
 def _keep_freed_memory() -> None:
@@ -52,16 +53,11 @@ def _keep_freed_memory() -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-
     from saucerfab.check import JSON_SCHEMA, Limits, check_many, reports_to_json, reports_to_junit, summary_line
     from saucerfab.errors import ConfigError
 
-    if args.schema:
-        print(json.dumps(JSON_SCHEMA, indent=2))
+    if schema_asked(args, JSON_SCHEMA, args.files, "give one or more mesh files to check (saucerfab check FILE...)"):
         return 0
-    if not args.files:
-        raise ConfigError("give one or more mesh files to check (saucerfab check FILE...)")
     changes: dict[str, object] = {}
     if args.max_triangles is not None:
         if args.max_triangles <= 0:
