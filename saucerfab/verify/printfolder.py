@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from saucerfab.design import reference_name
-from saucerfab.errors import InputFileError
+from saucerfab.cups import CUP_CLASSES, Cup, cup_from_dict
+from saucerfab.errors import ConfigError, InputFileError
 from saucerfab.formats import TABLE
 
 #: largest scene.json read (a real one is about 1.5 kB)
@@ -41,7 +42,6 @@ RENDERED_FORMATS = ("obj", "zip", "3mf", "glb")
 _SUFFIX = {f: TABLE[f].mesh_suffix if f in TABLE else f".{f}" for f in RENDERED_FORMATS}
 #: view names a print may have, in report order
 VIEW_NAMES = ("direct", "reflected", "reflected2")
-CUP_SHAPES = ("circle", "ellipse", "prism")
 
 
 class VerifyInputError(InputFileError):
@@ -69,35 +69,28 @@ class CupSpec:
     """The mirror cup of ``scene.json`` (file frame, mm).
 
     Attributes:
-        shape: ``circle``, ``ellipse`` or ``prism``.
         center: (x, y) of the cup's axis.
         bottom_z: z of the cup's bottom (its standing plane).
         height: mirror wall height.
-        radius: circle radius.
-        semi_axes: ellipse (a, b) along its local x and y.
-        sides: prism facet count.
-        circumradius: prism axis-to-vertex distance.
-        rotation_deg: ellipse local x / prism first vertex, from +x.
+        outline: the cup's own shape (:mod:`saucerfab.cups`) built from the
+            file's fields, lengths in mm, about its axis: its wall
+            (:meth:`~saucerfab.cups.Cup.wall`) is what verify ray-traces.
     """
 
-    shape: str
     center: tuple[float, float]
     bottom_z: float
     height: float
-    radius: float = 0.0
-    semi_axes: tuple[float, float] = (0.0, 0.0)
-    sides: int = 0
-    circumradius: float = 0.0
-    rotation_deg: float = 0.0
+    outline: Cup
+
+    @property
+    def shape(self) -> str:
+        """The shape's name in ``scene.json`` (``circle``, ``ellipse``, ``prism``, ...)."""
+        return self.outline.kind
 
     @property
     def width_mm(self) -> float:
         """The cup's width as export's ``--cup-diameter-mm`` names it."""
-        if self.shape == "circle":
-            return 2 * self.radius
-        if self.shape == "ellipse":
-            return 2 * self.semi_axes[0]
-        return 2 * self.circumradius
+        return self.outline.width_units
 
 
 @dataclass(frozen=True)
@@ -194,31 +187,21 @@ def load_print_scene(folder: Path) -> PrintScene:
             raise _bad(path, f"views.{name} is missing")
     c = _obj(path, d, "cup")
     shape = c.get("shape")
-    if shape not in CUP_SHAPES:
-        raise _bad(path, f"cup.shape is {str(shape)[:20]!r}; known: {', '.join(CUP_SHAPES)}")
-    common = {
-        "shape": shape,
-        "center": _vec(path, c.get("center"), 2, "cup.center"),
-        "bottom_z": _num(path, c.get("bottom_z"), "cup.bottom_z"),
-        "height": _num(path, c.get("height"), "cup.height", positive=True),
-    }
-    if shape == "circle":
-        cup = CupSpec(**common, radius=_num(path, c.get("radius"), "cup.radius", positive=True))
-    elif shape == "ellipse":
-        a, b = _vec(path, c.get("semi_axes"), 2, "cup.semi_axes")
-        if a <= 0 or b <= 0:
-            raise _bad(path, f"cup.semi_axes must be positive, got {[a, b]}")
-        cup = CupSpec(**common, semi_axes=(a, b), rotation_deg=_num(path, c.get("rotation_deg", 0.0), "cup.rotation_deg"))
-    else:
-        sides = c.get("sides")
-        if isinstance(sides, bool) or not isinstance(sides, int) or not 3 <= sides <= 64:
-            raise _bad(path, f"cup.sides must be an integer in [3, 64], got {str(sides)[:20]!r}")
-        cup = CupSpec(
-            **common,
-            sides=sides,
-            circumradius=_num(path, c.get("circumradius"), "cup.circumradius", positive=True),
-            rotation_deg=_num(path, c.get("rotation_deg", 0.0), "cup.rotation_deg"),
-        )
+    if shape not in CUP_CLASSES:
+        raise _bad(path, f"cup.shape is {str(shape)[:20]!r}; known: {', '.join(CUP_CLASSES)}")
+    center = _vec(path, c.get("center"), 2, "cup.center")
+    bottom_z = _num(path, c.get("bottom_z"), "cup.bottom_z")
+    height = _num(path, c.get("height"), "cup.height", positive=True)
+    shape_fields = {k: v for k, v in c.items() if k not in ("center", "bottom_z")}
+    for key, value in shape_fields.items():  # every length and angle a bounded number (sides too)
+        if key != "shape":
+            for x in value if isinstance(value, list) else [value]:
+                _num(path, x, f"cup.{key}")
+    try:
+        outline = cup_from_dict(shape_fields, shape)  # the shape's own checks, as for a scene file
+    except (ConfigError, TypeError, ValueError) as exc:
+        raise _bad(path, f"cup: {str(exc)[:200]}") from None
+    cup = CupSpec(center, bottom_z, height, outline)  # type: ignore[arg-type]
     saucer = _obj(path, d, "saucer")
     sx = _vec(path, saucer.get("x_range"), 2, "saucer.x_range")
     sy = _vec(path, saucer.get("y_range"), 2, "saucer.y_range")

@@ -143,52 +143,30 @@ def _mesh(
 def cup_mesh(cup: CupSpec, segments: int = CUP_SEGMENTS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The cup's mirror wall as triangles with outward shading normals.
 
+    Each straight piece of the wall (:meth:`saucerfab.cups.Cup.wall`) is a
+    quad with four corners of its own, so a facet keeps its flat normal and
+    a smooth cup's normals, equal at the shared edges, shade smoothly.
+
     Returns:
         positions (V, 3) mm, faces (F, 3), normals (V, 3) unit, outward.
     """
-    cx, cy = cup.center
+    wall = cup.outline.wall(segments)  # (S, 2, 4): [x, y, nx, ny] at each piece's two ends
     z0, z1 = cup.bottom_z, cup.bottom_z + cup.height
-    if cup.shape == "prism":
-        k = np.arange(cup.sides)
-        ang = math.radians(cup.rotation_deg) + 2 * np.pi * k / cup.sides
-        corner = np.stack([cx + cup.circumradius * np.cos(ang), cy + cup.circumradius * np.sin(ang)], 1)
-        a, b = corner, np.roll(corner, -1, axis=0)
-        mid = (ang + np.pi / cup.sides)[:, None]
-        nrm = np.concatenate([np.cos(mid), np.sin(mid), np.zeros_like(mid)], 1)
-        # four unshared corners per facet so each facet keeps its own flat normal
-        pos = np.stack(
-            [np.c_[a, np.full(len(a), z0)], np.c_[b, np.full(len(a), z0)], np.c_[b, np.full(len(a), z1)], np.c_[a, np.full(len(a), z1)]],
-            axis=1,
-        ).reshape(-1, 3)
-        normals = np.repeat(nrm, 4, axis=0)
-        base = 4 * k[:, None]
-        faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
-        return pos, faces, normals
-    t = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
-    if cup.shape == "circle":
-        ax, bx = cup.radius, cup.radius
-        rot = 0.0
-    else:
-        ax, bx = cup.semi_axes
-        rot = math.radians(cup.rotation_deg)
-    local = np.stack([ax * np.cos(t), bx * np.sin(t)], 1)
-    grad = np.stack([np.cos(t) / ax, np.sin(t) / bx], 1)  # the ellipse's outward normal direction
-    r = np.array([[math.cos(rot), -math.sin(rot)], [math.sin(rot), math.cos(rot)]])
-    ring = local @ r.T + (cx, cy)
-    g = grad @ r.T
-    g /= np.linalg.norm(g, axis=1, keepdims=True)
-    pos = np.concatenate([np.c_[ring, np.full(segments, z0)], np.c_[ring, np.full(segments, z1)]])
-    normals = np.concatenate([np.c_[g, np.zeros(segments)]] * 2)
-    k = np.arange(segments)
-    k1 = (k + 1) % segments
-    faces = np.concatenate([np.stack([k, k1, k1 + segments], 1), np.stack([k, k1 + segments, k + segments], 1)])
+    xy = wall[:, :, :2] + np.asarray(cup.center)
+    n = np.concatenate([wall[:, :, 2:], np.zeros((len(wall), 2, 1))], axis=2)
+    a, b = xy[:, 0], xy[:, 1]
+    pos = np.stack([np.c_[a, np.full(len(a), z0)], np.c_[b, np.full(len(a), z0)],
+                    np.c_[b, np.full(len(a), z1)], np.c_[a, np.full(len(a), z1)]], axis=1).reshape(-1, 3)
+    normals = np.stack([n[:, 0], n[:, 1], n[:, 1], n[:, 0]], axis=1).reshape(-1, 3)
+    base = 4 * np.arange(len(wall))[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
     return pos, faces, normals
 
 
 def _cap(cup: CupSpec) -> tuple[np.ndarray, np.ndarray]:
     """A disc closing the cup's top (what is inside the cup is not the mirror)."""
     pos, _, _ = cup_mesh(cup, segments=256)
-    ring = pos[len(pos) // 2 :] if cup.shape != "prism" else pos.reshape(-1, 4, 3)[:, 3]
+    ring = pos.reshape(-1, 4, 3)[:, 3]  # each piece's first end, at the top
     centre = np.array([[*cup.center, cup.bottom_z + cup.height]])
     p = np.concatenate([centre, ring])
     k = np.arange(1, len(p))
