@@ -270,11 +270,11 @@ def warm_up() -> list[str]:
     sor_sweeps(x, x.copy(), known, 1, 1.5)
     sor_sweeps(x, np.zeros((1, 1, 3), f32), known, 1, 1.5)
     residual(x, x.copy(), known, x.copy())
+    coarsen(x, known, coarse, coarse_known, True)
     pool_known(x, known, coarse, coarse_known)
     restrict_sum(x, known, coarse, coarse_known)
     upsample_unknown(coarse, known, x, x.copy())
     row_dots(x, x, np.zeros((6, 3)))
-    # coarsen is compiled through its two uses
     return [
         "bake_cells", "sor_sweeps", "residual", "coarsen", "pool_known", "restrict_sum", "upsample_unknown", "row_dots"
     ]
