@@ -266,6 +266,7 @@ def test_sliver_face_gives_finite_gradients() -> None:
     of the colour; the backward must not turn 0 * inf into NaN. The corners are the
     projected ones (x, y in NDC, depth) of the face where a full-size design met
     it: three NaN heights stopped the stage at once."""
+    from saucerfab.render.soft_common import SoftParams
     from saucerfab.render.soft_numba import _Config, _function
 
     proj64 = torch.tensor(
@@ -273,7 +274,7 @@ def test_sliver_face_gives_finite_gradients() -> None:
         dtype=torch.float32,
     ).double()
     f = torch.tensor([[0, 1, 2]])
-    cfg = _Config(512, 1e-5, 1e-4, (1.0, 1.0, 1.0), 1.0, 100.0, 1e-3, 1e-4)
+    cfg = _Config(512, SoftParams(1e-5, 1e-4, (1.0, 1.0, 1.0), 1.0, 100.0, 1e-3, 1e-4))
     grads = {}
     for dtype in (torch.float32, torch.float64):
         proj = proj64.to(dtype).requires_grad_(True)

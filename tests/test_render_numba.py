@@ -9,7 +9,7 @@ import torch
 
 from saucerfab.heightfield import base_shape, make_grid, triangulate
 from saucerfab.render import Camera, soft_rasterize
-from saucerfab.render.soft_numba import LANES, TILE_H, TILE_W
+from saucerfab.render.soft_tiles import LANES, TILE_H, TILE_W
 from saucerfab.scene import Saucer, Scene
 
 

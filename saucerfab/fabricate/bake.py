@@ -35,6 +35,7 @@ from saucerfab import imageio
 from saucerfab.design import Design, FaceView
 from saucerfab.fabricate.atlas import AtlasLayout, UVMap
 from saucerfab.fabricate.solid import Solid
+from saucerfab.render.sampling import sample_bilinear
 
 #: over-relaxation of the red-black sweeps: what the coarse levels leave is
 #: mostly smooth error, which plain Gauss-Seidel (1.0) removes slowly; 1.8
@@ -65,33 +66,6 @@ def locate_rows(layout: AtlasLayout) -> tuple[np.ndarray, np.ndarray]:
     # row_px decreases with i: search in the reversed (increasing) array
     k, t = _cells(py, layout.row_px[::-1])
     return n - 2 - k, 1.0 - t
-
-
-# --------------------------------------------------------------------------- sampling
-
-
-def sample_bilinear(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear samples of ``image`` (H, W, C) at texture coordinates ``uv`` (..., 2).
-
-    ``u`` runs left to right, ``v`` bottom to top; edges are clamped.
-    Returns (..., C) float32.
-    """
-    img = np.asarray(image)
-    hgt, wid = img.shape[:2]
-    x = uv[..., 0] * wid - 0.5
-    y = (1.0 - uv[..., 1]) * hgt - 0.5
-    x0 = np.floor(x)
-    y0 = np.floor(y)
-    tx = (x - x0).astype(np.float32)[..., None]
-    ty = (y - y0).astype(np.float32)[..., None]
-    x0 = x0.astype(np.int64)
-    y0 = y0.astype(np.int64)
-    xa, xb = np.clip(x0, 0, wid - 1), np.clip(x0 + 1, 0, wid - 1)
-    ya, yb = np.clip(y0, 0, hgt - 1), np.clip(y0 + 1, 0, hgt - 1)
-    f = img if img.dtype == np.float32 else img.astype(np.float32)
-    top = f[ya, xa] * (1 - tx) + f[ya, xb] * tx
-    bot = f[yb, xa] * (1 - tx) + f[yb, xb] * tx
-    return top * (1 - ty) + bot * ty
 
 
 # --------------------------------------------------------------------------- bake

@@ -159,39 +159,19 @@ def residual(x: np.ndarray, rhs: np.ndarray, known: np.ndarray, out: np.ndarray)
 
 
 @njit(cache=True)
-def pool_known(values: np.ndarray, known: np.ndarray, out: np.ndarray, out_known: np.ndarray) -> None:
-    """2x2 pooling: ``out`` = mean of the known children, ``out_known`` = any child known.
+def coarsen(values: np.ndarray, known: np.ndarray, out: np.ndarray, out_known: np.ndarray, mean: bool) -> None:
+    """One level down the pyramid: each coarse texel from its 2x2 children (those inside the array).
 
-    ``out`` is (ceil(h/2), ceil(w/2), C); children outside the array count as unknown.
+    ``mean``: ``out`` = mean of the known children, ``out_known`` = any child known
+    (:func:`pool_known`); otherwise ``out`` = sum of all children, ``out_known`` =
+    all children known (:func:`restrict_sum`). Shapes: ``values`` (h, w, C),
+    ``out`` (ceil(h/2), ceil(w/2), C).
     """
     h, w, nc = values.shape
     ch, cw = out_known.shape
     for r in prange(ch):
         for c in range(cw):
-            cnt = 0
-            for ch_ in range(nc):
-                out[r, c, ch_] = 0.0
-            for dr in range(2):
-                for dc in range(2):
-                    rr = 2 * r + dr
-                    cc = 2 * c + dc
-                    if rr < h and cc < w and known[rr, cc]:
-                        cnt += 1
-                        for ch_ in range(nc):
-                            out[r, c, ch_] += values[rr, cc, ch_]
-            out_known[r, c] = cnt > 0
-            if cnt > 0:
-                for ch_ in range(nc):
-                    out[r, c, ch_] /= cnt
-
-
-@njit(cache=True)
-def restrict_sum(r_fine: np.ndarray, known: np.ndarray, out: np.ndarray, out_known: np.ndarray) -> None:
-    """2x2 restriction: ``out`` = sum of the children, ``out_known`` = all (existing) children known."""
-    h, w, nc = r_fine.shape
-    ch, cw = out_known.shape
-    for r in prange(ch):
-        for c in range(cw):
+            cnt = 0  # known children
             allk = True
             for ch_ in range(nc):
                 out[r, c, ch_] = 0.0
@@ -200,11 +180,35 @@ def restrict_sum(r_fine: np.ndarray, known: np.ndarray, out: np.ndarray, out_kno
                     rr = 2 * r + dr
                     cc = 2 * c + dc
                     if rr < h and cc < w:
-                        if not known[rr, cc]:
+                        if known[rr, cc]:
+                            cnt += 1
+                        else:
                             allk = False
-                        for ch_ in range(nc):
-                            out[r, c, ch_] += r_fine[rr, cc, ch_]
-            out_known[r, c] = allk
+                        if known[rr, cc] or not mean:
+                            for ch_ in range(nc):
+                                out[r, c, ch_] += values[rr, cc, ch_]
+            if mean:
+                out_known[r, c] = cnt > 0
+                if cnt > 0:
+                    for ch_ in range(nc):
+                        out[r, c, ch_] /= cnt
+            else:
+                out_known[r, c] = allk
+
+
+@njit(cache=True)
+def pool_known(values: np.ndarray, known: np.ndarray, out: np.ndarray, out_known: np.ndarray) -> None:
+    """2x2 pooling: ``out`` = mean of the known children, ``out_known`` = any child known.
+
+    ``out`` is (ceil(h/2), ceil(w/2), C); children outside the array count as unknown.
+    """
+    coarsen(values, known, out, out_known, True)
+
+
+@njit(cache=True)
+def restrict_sum(r_fine: np.ndarray, known: np.ndarray, out: np.ndarray, out_known: np.ndarray) -> None:
+    """2x2 restriction: ``out`` = sum of the children, ``out_known`` = all (existing) children known."""
+    coarsen(r_fine, known, out, out_known, False)
 
 
 @njit(cache=True)
@@ -266,8 +270,11 @@ def warm_up() -> list[str]:
     sor_sweeps(x, x.copy(), known, 1, 1.5)
     sor_sweeps(x, np.zeros((1, 1, 3), f32), known, 1, 1.5)
     residual(x, x.copy(), known, x.copy())
+    coarsen(x, known, coarse, coarse_known, True)
     pool_known(x, known, coarse, coarse_known)
     restrict_sum(x, known, coarse, coarse_known)
     upsample_unknown(coarse, known, x, x.copy())
     row_dots(x, x, np.zeros((6, 3)))
-    return ["bake_cells", "sor_sweeps", "residual", "pool_known", "restrict_sum", "upsample_unknown", "row_dots"]
+    return [
+        "bake_cells", "sor_sweeps", "residual", "coarsen", "pool_known", "restrict_sum", "upsample_unknown", "row_dots"
+    ]

@@ -31,7 +31,7 @@ def sample_bilinear(image: np.ndarray, px: np.ndarray) -> np.ndarray:
     Returns:
         (..., C) float64.
     """
-    from saucerfab.render.hard import sample_texture
+    from saucerfab.render.sampling import sample_bilinear as sample_texture
 
     h, w = image.shape[:2]
     # the same lookup as the renderer's, in its UV convention (v up)

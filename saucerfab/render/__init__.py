@@ -1,11 +1,15 @@
 """Rendering: the camera convention, the differentiable soft rasterizer, hard previews.
 
 * :class:`Camera` - the one camera/NDC/pixel convention (:mod:`saucerfab.render.camera`).
-* :func:`soft_rasterize` - SoftRas soft rasterizer with gradients (:mod:`saucerfab.render.soft`);
-  backends: compiled numba CPU kernels (:mod:`saucerfab.render.soft_numba`) and
-  vectorized torch (:mod:`saucerfab.render.soft_torch`, also the CUDA path).
+* :func:`soft_rasterize` - SoftRas soft rasterizer with gradients (:mod:`saucerfab.render.soft`,
+  the op and the dispatch; its constants and parameters in :mod:`saucerfab.render.soft_common`);
+  backends: compiled numba CPU kernels (:mod:`saucerfab.render.soft_numba`, the per-face
+  setup and autograd glue; :mod:`saucerfab.render.soft_tiles`, the tiles and binning;
+  :mod:`saucerfab.render.soft_kernels`, a tile forward and backward; :mod:`saucerfab.render._simd`)
+  and vectorized torch (:mod:`saucerfab.render.soft_torch`, also the CUDA path).
 * :func:`rasterize_hard`, :func:`render_textured`, :func:`render_face_colors_hard` -
-  nearest-face rasterization for previews and visibility (:mod:`saucerfab.render.hard`).
+  nearest-face rasterization for previews and visibility (:mod:`saucerfab.render.hard`);
+  the bilinear texture lookup they and the bake share (:mod:`saucerfab.render.sampling`).
 
 Only the camera is imported with the package; the rasterizers (and numba,
 torch) load on first use, so ``from saucerfab.render.camera import Camera``

@@ -29,45 +29,45 @@ _X86 = platform.machine().lower() in ("x86_64", "amd64", "i386", "i686")
 _FTZ_DAZ = np.uint32(0x8040)
 
 
-@intrinsic
-def _bits_to_f32(typingctx, x):  # type: ignore[no-untyped-def]
-    """Reinterpret the low 32 bits of an integer as a float32 (LLVM ``bitcast``)."""
-    if not isinstance(x, types.Integer):
-        return None
+def _bits_to_float(bits: int):  # type: ignore[no-untyped-def]
+    """An intrinsic that reinterprets an integer as the float of ``bits`` (32 or 64) bits
+    (LLVM ``bitcast``), after truncating or sign-extending it to that width."""
+    float_type = {32: types.float32, 64: types.float64}[bits]
+    ir_float = {32: ir.FloatType(), 64: ir.DoubleType()}[bits]
 
-    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
-        v = args[0]
-        if x.bitwidth > 32:
-            v = builder.trunc(v, ir.IntType(32))
-        elif x.bitwidth < 32:
-            v = builder.sext(v, ir.IntType(32))
-        return builder.bitcast(v, ir.FloatType())
+    def bits_to_float(typingctx, x):  # type: ignore[no-untyped-def]
+        if not isinstance(x, types.Integer):
+            return None
 
-    return types.float32(x), codegen
+        def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+            v = args[0]
+            if x.bitwidth > bits:
+                v = builder.trunc(v, ir.IntType(bits))
+            elif x.bitwidth < bits:
+                v = builder.sext(v, ir.IntType(bits))
+            return builder.bitcast(v, ir_float)
+
+        return float_type(x), codegen
+
+    bits_to_float.__name__ = bits_to_float.__qualname__ = f"_bits_to_f{bits}"
+    return intrinsic(bits_to_float)
 
 
-@intrinsic
-def _bits_to_f64(typingctx, x):  # type: ignore[no-untyped-def]
-    """Reinterpret a 64-bit integer as a float64 (LLVM ``bitcast``)."""
-    if not isinstance(x, types.Integer):
-        return None
+_bits_to_f32 = _bits_to_float(32)
+_bits_to_f64 = _bits_to_float(64)
 
-    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
-        v = args[0]
-        if x.bitwidth < 64:
-            v = builder.sext(v, ir.IntType(64))
-        return builder.bitcast(v, ir.DoubleType())
 
-    return types.float64(x), codegen
+def _mxcsr_op(builder, name: str, slot):  # type: ignore[no-untyped-def]
+    """Emit ``llvm.x86.sse.{st,ld}mxcsr`` (``name``) on the 32-bit stack ``slot``."""
+    fnty = ir.FunctionType(ir.VoidType(), [slot.type])
+    builder.call(cgutils.get_or_insert_function(builder.module, fnty, name), [slot])
 
 
 @intrinsic
 def _read_mxcsr(typingctx):  # type: ignore[no-untyped-def]
     def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
         slot = cgutils.alloca_once(builder, ir.IntType(32))
-        fnty = ir.FunctionType(ir.VoidType(), [slot.type])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.x86.sse.stmxcsr")
-        builder.call(fn, [slot])
+        _mxcsr_op(builder, "llvm.x86.sse.stmxcsr", slot)
         return builder.load(slot)
 
     return types.uint32(), codegen
@@ -78,9 +78,7 @@ def _write_mxcsr(typingctx, value):  # type: ignore[no-untyped-def]
     def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
         slot = cgutils.alloca_once(builder, ir.IntType(32))
         builder.store(args[0], slot)
-        fnty = ir.FunctionType(ir.VoidType(), [slot.type])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.x86.sse.ldmxcsr")
-        builder.call(fn, [slot])
+        _mxcsr_op(builder, "llvm.x86.sse.ldmxcsr", slot)
         return context.get_dummy_value()
 
     return types.void(types.uint32), codegen
@@ -143,6 +141,10 @@ def vexp(x):  # type: ignore[no-untyped-def]
     return np.exp(x)
 
 
+# exp32 and exp64 are written out step by step on purpose: one generic version
+# looping over the coefficients (tried) gives the same results alone, but
+# inside the rasterizer's kernels LLVM then contracts their multiply-adds
+# differently and images and gradients change in the last bit.
 @overload(vexp)
 def _vexp_impl(x):  # type: ignore[no-untyped-def]
     if x == types.float32:

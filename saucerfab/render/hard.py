@@ -22,14 +22,13 @@ screen-space barycentrics. ``bary`` holds the perspective-correct barycentrics
 ``b_k = z w_k / z_k`` of the visible point, so the world point is
 ``sum_k b_k V_k`` and per-corner attributes (UVs) interpolate as ``sum_k b_k a_k``.
 
-Texture coordinates: u runs left to right, v bottom to top, over the whole
-texture (u, v in [0, 1]); texel (row r, column c) of an (H, W) texture has its
-centre at ``u = (c + 0.5)/W``, ``v = 1 - (r + 0.5)/H``. Sampling is bilinear
-with clamp-to-edge.
+Texture coordinates and sampling (bilinear, clamp-to-edge) are
+:mod:`saucerfab.render.sampling`'s.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -37,6 +36,7 @@ from numba import njit, prange
 
 from saucerfab.errors import ConfigError
 from saucerfab.render.camera import Camera
+from saucerfab.render.sampling import sample_bilinear
 
 #: rows per band of the image that one thread owns whole
 BAND = 16
@@ -177,6 +177,10 @@ def rasterize_hard(
     return face_id, bary, depth
 
 
+#: RGB of the previews where no face is seen: white
+PREVIEW_BACKGROUND = (1.0, 1.0, 1.0)
+
+
 def _background(background: Any) -> np.ndarray:
     bg = np.asarray(background, dtype=np.float64)
     if bg.shape != (3,) or not np.isfinite(bg).all():
@@ -184,13 +188,28 @@ def _background(background: Any) -> np.ndarray:
     return bg
 
 
-def render_face_colors_hard(
+def _preview(
     vertices: Any,
     faces: Any,
-    face_colors: Any,
     camera: Camera,
-    background: tuple[float, float, float] = (1.0, 1.0, 1.0),
-    image_size: int | None = None,
+    background: Any,
+    image_size: int | None,
+    shade: Callable[[np.ndarray, np.ndarray], np.ndarray],
+) -> np.ndarray:
+    """The background colour, and ``shade(face_id, bary)`` (each of shapes [N], [N, 3])
+    at the N pixels where a face is seen; shape [S, S, 3], float64."""
+    bg = _background(background)
+    face_id, bary, _ = rasterize_hard(vertices, faces, camera, image_size)
+    image = np.empty(face_id.shape + (3,))
+    image[:] = bg
+    seen = face_id >= 0
+    image[seen] = shade(face_id[seen], bary[seen])
+    return image
+
+
+def render_face_colors_hard(
+    vertices: Any, faces: Any, face_colors: Any, camera: Camera,
+    background: tuple[float, float, float] = PREVIEW_BACKGROUND, image_size: int | None = None,
 ) -> np.ndarray:
     """Nearest-face preview with one colour per face.
 
@@ -209,63 +228,20 @@ def render_face_colors_hard(
     colors = _as_numpy(face_colors, "face_colors", np.float64)
     if colors.shape != (f.shape[0], 3):
         raise ConfigError(f"face_colors must have shape ({f.shape[0]}, 3), got {colors.shape}")
-    bg = _background(background)
-    face_id, _, _ = rasterize_hard(vertices, faces, camera, image_size)
-    image = np.empty(face_id.shape + (3,))
-    image[:] = bg
-    seen = face_id >= 0
-    image[seen] = colors[face_id[seen]]
-    return image
-
-
-def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear lookup with clamp-to-edge.
-
-    Args:
-        texture: Shape [H, W, C], uint8 (0..255, returned as 0..1) or float.
-        uv: Texture coordinates, shape [..., 2] (u left to right, v bottom to top).
-
-    Returns:
-        Samples, shape [..., C], float64.
-    """
-    if texture.dtype == np.uint8:
-        texture = texture.astype(np.float64) / 255.0
-    h, w = texture.shape[:2]
-    x = uv[..., 0] * w - 0.5  # texel centres at u = (c + 0.5)/W
-    y = (1.0 - uv[..., 1]) * h - 0.5  # row 0 is the top, v = 1
-    x0 = np.floor(x)
-    y0 = np.floor(y)
-    fx = (x - x0)[..., None]
-    fy = (y - y0)[..., None]
-    x0i = np.clip(x0.astype(np.int64), 0, w - 1)
-    x1i = np.clip(x0.astype(np.int64) + 1, 0, w - 1)
-    y0i = np.clip(y0.astype(np.int64), 0, h - 1)
-    y1i = np.clip(y0.astype(np.int64) + 1, 0, h - 1)
-    top = texture[y0i, x0i] * (1 - fx) + texture[y0i, x1i] * fx
-    bottom = texture[y1i, x0i] * (1 - fx) + texture[y1i, x1i] * fx
-    return top * (1 - fy) + bottom * fy
+    return _preview(vertices, faces, camera, background, image_size, lambda fid, _: colors[fid])
 
 
 def render_textured(
-    vertices: Any,
-    faces: Any,
-    face_uvs: Any,
-    texture: Any,
-    camera: Camera,
-    background: tuple[float, float, float] = (1.0, 1.0, 1.0),
-    image_size: int | None = None,
+    vertices: Any, faces: Any, face_uvs: Any, texture: Any, camera: Camera,
+    background: tuple[float, float, float] = PREVIEW_BACKGROUND, image_size: int | None = None,
 ) -> np.ndarray:
     """Nearest-face preview of a textured mesh (perspective-correct UVs, bilinear).
 
     Args:
-        vertices: World positions, shape [V, 3], model units.
-        faces: Vertex indices, shape [F, 3].
         face_uvs: UV of each face corner, shape [F, 3, 2] (u left to right,
             v bottom to top, [0, 1] spans the texture).
         texture: Shape [H, W, 3], uint8 (0..255) or float (0..1); row 0 is the top.
-        camera: The view.
-        background: RGB where no face is seen.
-        image_size: Output size S; default ``camera.image_size``.
+        vertices, faces, camera, background, image_size: As :func:`render_face_colors_hard`.
 
     Returns:
         Image, shape [S, S, 3], float64 in [0, 1], row 0 at the top.
@@ -283,11 +259,8 @@ def render_textured(
         tex = tex.astype(np.float64)
     else:
         raise ConfigError(f"texture must be uint8 (0..255) or float (0..1), got {tex.dtype}")
-    bg = _background(background)
-    face_id, bary, _ = rasterize_hard(vertices, faces, camera, image_size)
-    image = np.empty(face_id.shape + (3,))
-    image[:] = bg
-    seen = face_id >= 0
-    uv = np.einsum("nk,nkc->nc", bary[seen], uvs[face_id[seen]])
-    image[seen] = sample_texture(tex, uv)
-    return image
+
+    def shade(fid: np.ndarray, bary: np.ndarray) -> np.ndarray:
+        return sample_bilinear(tex, np.einsum("nk,nkc->nc", bary, uvs[fid]))
+
+    return _preview(vertices, faces, camera, background, image_size, shade)

@@ -62,29 +62,16 @@ import math
 from typing import TYPE_CHECKING, Literal
 
 from saucerfab.errors import ConfigError
+from saucerfab.render.soft_common import DEFAULTS, DET_EPS, WSUM_EPS, SoftParams, distance_threshold
 
 if TYPE_CHECKING:
     import torch
 
     from saucerfab.render.camera import Camera
 
+__all__ = ["DET_EPS", "WSUM_EPS", "Backend", "SoftParams", "distance_threshold", "select_backend", "soft_rasterize"]
+
 Backend = Literal["auto", "torch", "numba"]
-
-#: SoftRas's determinant clamp in its triangle preprocessing (``1e-10``)
-DET_EPS = 1e-10
-#: SoftRas's clamp of the clipped barycentric sum in ``barycentric_clip`` (``1e-5``)
-WSUM_EPS = 1e-5
-
-
-def distance_threshold(sigma: float, dist_eps: float) -> float:
-    """Squared NDC distance beyond which a pixel outside a face is skipped.
-
-    SoftRas's ``log(1 / dist_eps - 1) * sigma``: the ``d^2`` at which the
-    coverage ``sigmoid(-d^2 / sigma)`` equals ``dist_eps``. At the defaults
-    (``dist_eps = 1e-4``) it is ``9.21 sigma``: 2.5 pixels of a 512 image at
-    ``sigma = 1e-5``, a quarter pixel at ``1e-7``.
-    """
-    return math.log(1.0 / dist_eps - 1.0) * sigma
 
 
 def select_backend(backend: str, device: "torch.device") -> str:
@@ -108,18 +95,8 @@ def select_backend(backend: str, device: "torch.device") -> str:
     return backend
 
 
-def _check_args(
-    vertices: "torch.Tensor",
-    faces: "torch.Tensor",
-    face_colors: "torch.Tensor",
-    sigma: float,
-    gamma: float,
-    background: tuple[float, float, float],
-    near: float,
-    far: float,
-    eps: float,
-    dist_eps: float,
-) -> None:
+def _check_tensors(vertices: "torch.Tensor", faces: "torch.Tensor", face_colors: "torch.Tensor") -> None:
+    """Raise :class:`ConfigError` unless the mesh tensors have the shapes, dtypes and device the backends need."""
     import torch
 
     if not isinstance(vertices, torch.Tensor) or vertices.ndim != 2 or vertices.shape[1] != 3:
@@ -152,17 +129,34 @@ def _check_args(
             raise ConfigError(
                 f"faces index vertices {lo}..{hi}, but there are {vertices.shape[0]} vertices"
             )
-    for name, v in (("sigma", sigma), ("gamma", gamma)):
+
+
+def _checked_params(p: SoftParams) -> SoftParams:
+    """``p`` with plain Python floats, after checking each value's range.
+
+    Raises:
+        ConfigError: a parameter outside its range (or not a number).
+    """
+    for name, v in (("sigma", p.sigma), ("gamma", p.gamma)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
             raise ConfigError(f"{name} must be a positive number, got {v!r}")
-    if not (isinstance(dist_eps, (int, float)) and 0 < dist_eps < 0.5):
-        raise ConfigError(f"dist_eps must be in (0, 0.5) (a coverage level), got {dist_eps!r}")
-    if not (math.isfinite(near) and math.isfinite(far) and 0 <= near < far):
-        raise ConfigError(f"need 0 <= near < far, got near={near!r}, far={far!r}")
-    if not math.isfinite(eps):
-        raise ConfigError(f"eps must be a finite number, got {eps!r}")
-    if len(tuple(background)) != 3 or not all(math.isfinite(float(c)) for c in background):
-        raise ConfigError(f"background must be 3 finite numbers (RGB), got {background!r}")
+    if not (isinstance(p.dist_eps, (int, float)) and 0 < p.dist_eps < 0.5):
+        raise ConfigError(f"dist_eps must be in (0, 0.5) (a coverage level), got {p.dist_eps!r}")
+    if not (math.isfinite(p.near) and math.isfinite(p.far) and 0 <= p.near < p.far):
+        raise ConfigError(f"need 0 <= near < far, got near={p.near!r}, far={p.far!r}")
+    if not math.isfinite(p.eps):
+        raise ConfigError(f"eps must be a finite number, got {p.eps!r}")
+    if len(tuple(p.background)) != 3 or not all(math.isfinite(float(c)) for c in p.background):
+        raise ConfigError(f"background must be 3 finite numbers (RGB), got {p.background!r}")
+    return SoftParams(
+        sigma=float(p.sigma),
+        gamma=float(p.gamma),
+        background=tuple(float(c) for c in p.background),  # type: ignore[arg-type]
+        near=float(p.near),
+        far=float(p.far),
+        eps=float(p.eps),
+        dist_eps=float(p.dist_eps),
+    )
 
 
 def soft_rasterize(
@@ -171,13 +165,13 @@ def soft_rasterize(
     face_colors: "torch.Tensor",
     camera: "Camera",
     *,
-    sigma: float = 1e-5,
-    gamma: float = 1e-4,
-    background: tuple[float, float, float] = (0.0, 0.0, 0.0),
-    near: float = 1.0,
-    far: float = 100.0,
-    eps: float = 1e-3,
-    dist_eps: float = 1e-4,
+    sigma: float = DEFAULTS.sigma,
+    gamma: float = DEFAULTS.gamma,
+    background: tuple[float, float, float] = DEFAULTS.background,
+    near: float = DEFAULTS.near,
+    far: float = DEFAULTS.far,
+    eps: float = DEFAULTS.eps,
+    dist_eps: float = DEFAULTS.dist_eps,
     backend: Backend = "auto",
 ) -> "tuple[torch.Tensor, torch.Tensor]":
     """Soft-rasterize a mesh with per-face colours (SoftRas semantics, differentiable).
@@ -223,23 +217,15 @@ def soft_rasterize(
     """
     import torch
 
-    _check_args(vertices, faces, face_colors, sigma, gamma, background, near, far, eps, dist_eps)
+    _check_tensors(vertices, faces, face_colors)
+    params = _checked_params(SoftParams(sigma, gamma, background, near, far, eps, dist_eps))
     chosen = select_backend(backend, vertices.device)
     colors = face_colors.to(vertices.dtype)
     faces = faces.to(torch.int64)
-    params = dict(
-        sigma=float(sigma),
-        gamma=float(gamma),
-        background=tuple(float(c) for c in background),
-        near=float(near),
-        far=float(far),
-        eps=float(eps),
-        dist_eps=float(dist_eps),
-    )
     if chosen == "numba":
         from saucerfab.render.soft_numba import soft_rasterize_numba
 
-        return soft_rasterize_numba(vertices, faces, colors, camera, **params)  # type: ignore[arg-type]
+        return soft_rasterize_numba(vertices, faces, colors, camera, params)
     from saucerfab.render.soft_torch import soft_rasterize_torch
 
-    return soft_rasterize_torch(vertices, faces, colors, camera, **params)  # type: ignore[arg-type]
+    return soft_rasterize_torch(vertices, faces, colors, camera, params)

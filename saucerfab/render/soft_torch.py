@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from saucerfab.render.soft import DET_EPS, WSUM_EPS, distance_threshold
+from saucerfab.render.soft_common import DEFAULTS, DET_EPS, WSUM_EPS, SoftParams, distance_threshold
 
 if TYPE_CHECKING:
     import torch
@@ -65,10 +65,7 @@ def candidate_pairs(
 ) -> "tuple[torch.Tensor, torch.Tensor, torch.Tensor]":
     """All (face, pixel) pairs of the widened bounding boxes.
 
-    Args:
-        face_xy: Projected corners, shape [F, 3, 2], NDC.
-        image_size: S.
-        radius: Widening of each box, NDC units.
+    Args: as :func:`face_pixel_boxes`.
 
     Returns:
         ``(face, row, col)``, each shape [P], int64, grouped by face.
@@ -89,7 +86,7 @@ def candidate_pairs(
 
 
 def count_candidate_pairs(vertices: "torch.Tensor", faces: "torch.Tensor", camera: "Camera",
-                          sigma: float = 1e-5, dist_eps: float = 1e-4) -> int:
+                          sigma: float = DEFAULTS.sigma, dist_eps: float = DEFAULTS.dist_eps) -> int:
     """Number of bounding-box pixel-face pairs the torch backend evaluates (a work measure)."""
     import torch
 
@@ -102,38 +99,23 @@ def count_candidate_pairs(vertices: "torch.Tensor", faces: "torch.Tensor", camer
 
 
 def soft_rasterize_torch(
-    vertices: "torch.Tensor",
-    faces: "torch.Tensor",
-    face_colors: "torch.Tensor",
-    camera: "Camera",
-    *,
-    sigma: float,
-    gamma: float,
-    background: tuple[float, float, float],
-    near: float,
-    far: float,
-    eps: float,
-    dist_eps: float,
+    vertices: "torch.Tensor", faces: "torch.Tensor", face_colors: "torch.Tensor", camera: "Camera", params: SoftParams
 ) -> "tuple[torch.Tensor, torch.Tensor]":
     """The torch backend of :func:`saucerfab.render.soft_rasterize` (arguments checked there).
 
-    Args:
-        vertices: World positions, shape [V, 3], model units.
-        faces: Vertex indices, shape [F, 3], int64.
-        face_colors: RGB per face, shape [F, 3], same dtype as ``vertices``.
-        camera: The view (S = ``camera.image_size``).
-        sigma, gamma, background, near, far, eps, dist_eps: As
-            :func:`saucerfab.render.soft_rasterize`.
-
-    Returns:
-        ``(image, alpha)``: shapes [S, S, 3] and [S, S], ``vertices.dtype``.
+    Takes and returns what :func:`saucerfab.render.soft_numba.soft_rasterize_numba`
+    does (any device here): ``vertices`` [V, 3], ``faces`` [F, 3] int64,
+    ``face_colors`` [F, 3] in ``vertices.dtype``, the view, the checked
+    ``params``; gives ``(image [S, S, 3], alpha [S, S])``.
     """
     import torch
     import torch.nn.functional as F
 
+    sigma, gamma, background = params.sigma, params.gamma, params.background
+    near, far, eps = params.near, params.far, params.eps
     s = camera.image_size
     dtype, dev = vertices.dtype, vertices.device
-    thr = distance_threshold(sigma, dist_eps)
+    thr = params.threshold
     proj = camera.project_torch(vertices)  # (V, 3): x_ndc, y_ndc, depth
     fv = proj[faces]  # (F, 3 corners, 3)
     x0, x1, x2 = fv[:, 0, 0], fv[:, 1, 0], fv[:, 2, 0]

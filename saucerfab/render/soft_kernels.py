@@ -1,0 +1,446 @@
+"""The numba kernels that render one tile of the soft rasterizer, forward and backward.
+
+The formulas are :mod:`saucerfab.render.soft`'s; the tiles, their state
+layout and the binning are :mod:`saucerfab.render.soft_tiles`'s; the per-face
+setup and the autograd glue are :mod:`saucerfab.render.soft_numba`'s.
+
+* The innermost loop runs over the pixels of one row of a face's box in whole
+  groups of ``LANES``, branch-free (selects and masks; lanes past the box are
+  masked out like skipped pairs), indexing one tile-local state array through
+  a view with compile-time field offsets, and uses
+  :func:`saucerfab.render._simd.vexp` instead of libm's exp: LLVM vectorizes it
+  (AVX2: 8 float32 / 4 float64 lanes). The per-pair pieces that both
+  directions compute (barycentrics, nearest edge point, coverage) are small
+  functions numba inlines into the loop (``inline="always"``), so the loop
+  LLVM sees is the same as if they were written out.
+* The forward keeps per pixel the softmax maximum and sum and the alpha
+  product, and per (entry, row) the first and last lane whose pair is not
+  skipped; the backward recomputes each pair's geometry on those lanes only
+  (cheaper than storing millions of pairs).
+* float32 denormals are flushed to zero on the worker threads while they
+  render a tile (MXCSR restored afterwards).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from saucerfab.render._simd import ftz_on, ftz_restore, vexp
+from saucerfab.render.soft_common import SoftParams, WSUM_EPS
+from saucerfab.render.soft_tiles import JIT_OPTS, LANES, N_GRAD, NLOC, SW, TILE_H, TILE_W
+
+#: per-column gradient accumulators of the backward
+N_ACC = 18
+
+# index of each constant in the parameter vector K handed to the kernels
+K_THR, K_INV_SIGMA, K_NEAR, K_FAR, K_INV_FR, K_INV_GAMMA, K_EPS, K_SUM0, K_BG = 0, 1, 2, 3, 4, 5, 6, 7, 8
+K_WSUM, K_EE_MIN, K_ZERO, K_ONE, N_K = 11, 12, 13, 14, 15
+
+#: inlined into the caller: its lanes stay one vectorizable loop
+_INLINE = dict(inline="always")
+
+
+def kernel_constants(params: SoftParams, dtype: np.dtype) -> np.ndarray:
+    """The parameter vector K (:data:`N_K`,) of the kernels, in the faces' dtype.
+
+    Typed constants: a bare 0 or 1 in a kernel would promote float32 math to float64.
+    """
+    k = np.zeros(N_K, dtype)
+    k[K_THR] = params.threshold
+    k[K_INV_SIGMA] = 1.0 / params.sigma
+    k[K_NEAR], k[K_FAR] = params.near, params.far
+    k[K_INV_FR] = 1.0 / (params.far - params.near)
+    k[K_INV_GAMMA] = 1.0 / params.gamma
+    k[K_EPS] = params.eps
+    k[K_SUM0] = math.exp(params.eps / params.gamma)
+    k[K_BG:K_BG + 3] = params.background
+    k[K_WSUM] = WSUM_EPS
+    k[K_EE_MIN] = 1e-30
+    k[K_ONE] = 1.0
+    return k
+
+
+# --------------------------------------------------------------------------- per face and per pair
+
+
+@njit(**JIT_OPTS)
+def _face_consts(f, cxy, inv, iz, col, ee_min, one):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """What the pair loops read of face f: corner x, y (6), edge vectors (6) and
+    1/|edge|^2 (3; degenerate edges project onto their start, as the torch
+    backend's clamp makes them), the barycentric matrix row by row (9), the
+    inverse corner depths (3) and the colour (3)."""
+    ax0, ay0, ax1, ay1, ax2, ay2 = cxy[f, 0], cxy[f, 1], cxy[f, 2], cxy[f, 3], cxy[f, 4], cxy[f, 5]
+    ex0, ey0 = ax1 - ax0, ay1 - ay0
+    ex1, ey1 = ax2 - ax1, ay2 - ay1
+    ex2, ey2 = ax0 - ax2, ay0 - ay2
+    ie0 = one / max(ex0 * ex0 + ey0 * ey0, ee_min)
+    ie1 = one / max(ex1 * ex1 + ey1 * ey1, ee_min)
+    ie2 = one / max(ex2 * ex2 + ey2 * ey2, ee_min)
+    return (
+        ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2,
+        inv[f, 0], inv[f, 1], inv[f, 2], inv[f, 3], inv[f, 4], inv[f, 5], inv[f, 6], inv[f, 7], inv[f, 8],
+        iz[f, 0], iz[f, 1], iz[f, 2], col[f, 0], col[f, 1], col[f, 2],
+    )
+
+
+@njit(**JIT_OPTS, **_INLINE)
+def _entry_span(entry, entry_face, box, rt0, ct0):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Face of a tile entry and its box cut to the tile at (rt0, ct0): ``(f, ra, rb, ca, cb)``,
+    inclusive rows and columns (empty when ``rb < ra`` or ``cb < ca``)."""
+    f = entry_face[entry]
+    ra, rb = max(box[f, 0], rt0), min(box[f, 1], rt0 + TILE_H - 1)
+    ca, cb = max(box[f, 2], ct0), min(box[f, 3], ct0 + TILE_W - 1)
+    return f, ra, rb, ca, cb
+
+
+@njit(**JIT_OPTS, **_INLINE)
+def _bary(px, i00, i10, i20, b0, b1, b2, zero, one):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Barycentrics ``w`` of the pixel at NDC x ``px`` on a row whose y terms are
+    ``b_k = i_k1 py + i_k2``, and whether all ``0 < w_k < 1`` (inside)."""
+    w0 = i00 * px + b0
+    w1 = i10 * px + b1
+    w2 = i20 * px + b2
+    inside = (w0 > zero) & (w0 < one) & (w1 > zero) & (w1 < one) & (w2 > zero) & (w2 < one)
+    return w0, w1, w2, inside
+
+
+@njit(**JIT_OPTS, **_INLINE)
+def _segment(px, hy, ax, ex, ey, ie, zero, one):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Nearest point of the edge from corner ``(ax, ay)`` along ``(ex, ey)`` to the pixel
+    (``hy = py - ay``): its parameter ``t`` in [0, 1], the offset ``(dx, dy)`` from the
+    pixel to it, and the squared distance."""
+    hx = px - ax
+    tt = min(max((hx * ex + hy * ey) * ie, zero), one)
+    dx, dy = tt * ex - hx, tt * ey - hy
+    return tt, dx, dy, dx * dx + dy * dy
+
+
+@njit(**JIT_OPTS, **_INLINE)
+def _nearer(px, hy, ax, ex, ey, ie, zero, one, d2, bt, bdx, bdy):  # type: ignore[no-untyped-def] # pragma: no cover
+    """The nearer of the best edge point so far ``(d2, bt, bdx, bdy)`` and this edge's
+    (:func:`_segment`): ``(this edge is nearer, d2, t, dx, dy)``; ties keep the earlier."""
+    tt, dx, dy, dd = _segment(px, hy, ax, ex, ey, ie, zero, one)
+    sel = dd < d2
+    return sel, (dd if sel else d2), (tt if sel else bt), (dx if sel else bdx), (dy if sel else bdy)
+
+
+@njit(**JIT_OPTS, **_INLINE)
+def _coverage(xs, zero, one):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """``(sigmoid(xs), 1 - sigmoid(xs))`` with one exp of a non-positive argument."""
+    ex = vexp(-abs(xs))
+    rec = one / (one + ex)
+    erec = ex * rec
+    cov = rec if xs >= zero else erec
+    unc = erec if xs >= zero else rec
+    return cov, unc
+
+
+@njit(**JIT_OPTS, **_INLINE)
+def _clip01(w0, w1, w2, zero, one):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """The barycentrics clamped to [0, 1] (SoftRas's ``barycentric_clip`` before normalizing)."""
+    return min(max(w0, zero), one), min(max(w1, zero), one), min(max(w2, zero), one)
+
+
+# --------------------------------------------------------------------------- forward
+
+
+@njit(**JIT_OPTS)
+def _forward_tile(
+    t, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab, K,
+    image, alpha, st_m, st_s, st_p, row_lo, row_hi,
+):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Render tile ``t``: write ``image``/``alpha``, the backward's per-pixel state and,
+    per (entry, row), the first and last lane where the pair is not skipped."""
+    ty, tx = t // n_tx, t % n_tx
+    rt0, ct0 = ty * TILE_H, tx * TILE_W
+    zero, one = K[K_ZERO], K[K_ONE]
+    thr, inv_sigma, near, far = K[K_THR], K[K_INV_SIGMA], K[K_NEAR], K[K_FAR]
+    inv_fr, inv_gamma, wsum_min, ee_min = K[K_INV_FR], K[K_INV_GAMMA], K[K_WSUM], K[K_EE_MIN]
+    # fields: 0 running max, 1 running sum, 2-4 colour sums, 5 prod(1 - D).
+    # SoftRas's start: maximum eps, sum exp(eps/gamma), colour background * sum.
+    st = np.empty(6 * NLOC, K.dtype)
+    for q in range(NLOC):
+        st[q] = K[K_EPS]
+        st[NLOC + q] = K[K_SUM0]
+        st[2 * NLOC + q] = K[K_BG] * K[K_SUM0]
+        st[3 * NLOC + q] = K[K_BG + 1] * K[K_SUM0]
+        st[4 * NLOC + q] = K[K_BG + 2] * K[K_SUM0]
+        st[5 * NLOC + q] = one
+
+    for idx in range(tile_start[t], tile_start[t + 1]):
+        entry = tile_entry[idx]
+        f, ra, rb, ca, cbx = _entry_span(entry, entry_face, box, rt0, ct0)
+        if rb < ra or cbx < ca:
+            continue
+        (ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2,
+         i00, i01, i02, i10, i11, i12, i20, i21, i22, iz0, iz1, iz2, fr, fg, fb) = _face_consts(
+            f, cxy, inv, iz, col, ee_min, one
+        )
+        # whole lane groups: a fixed-width loop without remainder; lanes past
+        # the box (the last group's tail) are masked out like skipped pairs
+        span = np.int32(cbx - ca + 1)
+        n = (cbx - ca + LANES) // LANES * LANES
+        n32, m32 = np.int32(n), np.int32(-1)
+        pxv = px_tab[ca:]
+        rs = row_start[entry] - ra
+        for r in range(ra, rb + 1):
+            py = py_tab[r]
+            b0 = i01 * py + i02
+            b1 = i11 * py + i12
+            b2 = i21 * py + i22
+            hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
+            # a view indexed by the loop counter plus constants: no negative-index
+            # wraparound, so LLVM sees unit-stride accesses and vectorizes
+            sv = st[(r - rt0) * SW + (ca - ct0):]
+            lo, hi = n32, m32
+            for lane in range(n):
+                px = pxv[lane]
+                w0, w1, w2, inside = _bary(px, i00, i10, i20, b0, b1, b2, zero, one)
+                # squared distance to the closed triangle = nearest of the three segments
+                d2 = _segment(px, hy0, ax0, ex0, ey0, ie0, zero, one)[3]
+                d2 = min(d2, _segment(px, hy1, ax1, ex1, ey1, ie1, zero, one)[3])
+                d2 = min(d2, _segment(px, hy2, ax2, ex2, ey2, ie2, zero, one)[3])
+                # int32 lane numbers: 64-bit ones would halve the vector width
+                l32 = np.int32(lane)
+                valid = (inside | (d2 < thr)) & (l32 < span)
+                lo = min(lo, l32 if valid else n32)
+                hi = max(hi, l32 if valid else m32)
+                xs = (d2 if inside else -d2) * inv_sigma
+                cov, unc = _coverage(xs, zero, one)
+                sv[5 * NLOC + lane] = sv[5 * NLOC + lane] * (unc if valid else one)
+                # perspective-correct depth from the clipped barycentrics
+                wc0, wc1, wc2 = _clip01(w0, w1, w2, zero, one)
+                sw = max(wc0 + wc1 + wc2, wsum_min)
+                z = sw / (wc0 * iz0 + wc1 * iz1 + wc2 * iz2)
+                rgb = valid & (z >= near) & (z <= far)
+                zn = (far - z) * inv_fr
+                # online softmax with SoftRas's running maximum, one exp per pair
+                mo = sv[lane]
+                dz = zn - mo
+                e = vexp(-abs(dz) * inv_gamma)
+                newmax = rgb & (dz > zero)
+                scale = e if newmax else one
+                term = (one if newmax else e) * cov
+                term = term if rgb else zero
+                sv[lane] = zn if newmax else mo
+                sv[NLOC + lane] = sv[NLOC + lane] * scale + term
+                sv[2 * NLOC + lane] = sv[2 * NLOC + lane] * scale + term * fr
+                sv[3 * NLOC + lane] = sv[3 * NLOC + lane] * scale + term * fg
+                sv[4 * NLOC + lane] = sv[4 * NLOC + lane] * scale + term * fb
+            # the backward needs only the lanes from lo to hi of this row
+            row_lo[rs + r] = lo
+            row_hi[rs + r] = hi
+
+    for r in range(rt0, min(rt0 + TILE_H, size)):
+        for c in range(ct0, min(ct0 + TILE_W, size)):
+            q = (r - rt0) * SW + (c - ct0)
+            g = r * wp + c
+            rs = one / st[NLOC + q]
+            image[r, c, 0] = st[2 * NLOC + q] * rs
+            image[r, c, 1] = st[3 * NLOC + q] * rs
+            image[r, c, 2] = st[4 * NLOC + q] * rs
+            alpha[r, c] = one - st[5 * NLOC + q]
+            st_m[g] = st[q]
+            st_s[g] = st[NLOC + q]
+            st_p[g] = st[5 * NLOC + q]
+
+
+@njit(parallel=True, **JIT_OPTS)
+def forward(
+    order, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab,
+    K, image, alpha, st_m, st_s, st_p, row_lo, row_hi,
+):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Render every tile in ``order`` (:func:`_forward_tile`); run under
+    :func:`saucerfab.render.soft_tiles.one_tile_chunks`."""
+    for k in prange(order.shape[0]):
+        old = ftz_on()
+        _forward_tile(
+            order[k], n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col,
+            px_tab, py_tab, K, image, alpha, st_m, st_s, st_p, row_lo, row_hi,
+        )
+        ftz_restore(old)
+
+
+# --------------------------------------------------------------------------- backward
+
+
+@njit(error_model="numpy", cache=True, nogil=True, fastmath={"contract", "reassoc"})
+def _lane_sum(a, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """sum(a[:n]); reassociation lets LLVM vectorize it (same code, same order: deterministic)."""
+    tot = a[0] - a[0]
+    for k in range(n):
+        tot += a[k]
+    return tot
+
+
+@njit(error_model="numpy", cache=True, nogil=True, fastmath={"contract", "reassoc"})
+def _lane_dot(a, b, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """sum(a[:n] * b[:n]), vectorized as :func:`_lane_sum`."""
+    tot = a[0] - a[0]
+    for k in range(n):
+        tot += a[k] * b[k]
+    return tot
+
+
+@njit(**JIT_OPTS)
+def _backward_tile(
+    t, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab, K,
+    image, g_image, g_alpha, st_m, st_s, st_p, row_lo, row_hi, grad,
+):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Gradients of tile ``t``'s pixels into the slots ``grad[entry]`` of its entries."""
+    ty, tx = t // n_tx, t % n_tx
+    rt0, ct0 = ty * TILE_H, tx * TILE_W
+    zero, one = K[K_ZERO], K[K_ONE]
+    two = one + one
+    thr, inv_sigma, near, far = K[K_THR], K[K_INV_SIGMA], K[K_NEAR], K[K_FAR]
+    inv_fr, inv_gamma, wsum_min, ee_min = K[K_INV_FR], K[K_INV_GAMMA], K[K_WSUM], K[K_EE_MIN]
+    # fields (layout as in _forward_tile): 0 the softmax maximum, 1-3 dL/dimage / sum,
+    # 4 sum_k dL/dimage_k image_k / sum, 5 dL/dalpha * prod(1 - D)
+    st = np.zeros(6 * NLOC, K.dtype)
+    for r in range(rt0, min(rt0 + TILE_H, size)):
+        for c in range(ct0, min(ct0 + TILE_W, size)):
+            q = (r - rt0) * SW + (c - ct0)
+            g = r * wp + c
+            rs = one / st_s[g]
+            a0, a1, a2 = g_image[r, c, 0] * rs, g_image[r, c, 1] * rs, g_image[r, c, 2] * rs
+            st[q] = st_m[g]
+            st[NLOC + q], st[2 * NLOC + q], st[3 * NLOC + q] = a0, a1, a2
+            st[4 * NLOC + q] = a0 * image[r, c, 0] + a1 * image[r, c, 1] + a2 * image[r, c, 2]
+            st[5 * NLOC + q] = g_alpha[r, c] * st_p[g]
+
+    # Gradient accumulators per column of the face's span, summed over its rows
+    # elementwise (vectorizes without reassociation), reduced once per entry.
+    # Slots 0-5: corner x, y; 6-8: sum of dL/dw_k (times px at the reduction:
+    # the matrix row's x and constant terms); 9-11: sum of dL/dw_k * py;
+    # 12-14: inverse depths; 15-17: colours.
+    acc = np.zeros(N_ACC * SW, K.dtype)
+    for idx in range(tile_start[t], tile_start[t + 1]):
+        entry = tile_entry[idx]
+        f, ra, rb, ca, cbx = _entry_span(entry, entry_face, box, rt0, ct0)
+        if rb < ra or cbx < ca:
+            for j in range(N_GRAD):
+                grad[entry, j] = zero
+            continue
+        # a row's lanes start at its first unskipped pair (the forward's row_lo)
+        # and may run up to LANES - 1 past the box; m covers every row's lanes
+        m = min(cbx - ca + LANES, SW - (ca - ct0))
+        ac = acc[ca - ct0:]  # accumulator j of column ca + k is ac[j * SW + k]
+        for j in range(N_ACC):  # clear only the columns this entry uses
+            ac[j * SW:j * SW + m] = zero
+        rs = row_start[entry] - ra
+        (ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2,
+         i00, i01, i02, i10, i11, i12, i20, i21, i22, iz0, iz1, iz2, fr, fg, fb) = _face_consts(
+            f, cxy, inv, iz, col, ee_min, one
+        )
+        for r in range(ra, rb + 1):
+            lo, hi = row_lo[rs + r], row_hi[rs + r]
+            if hi < lo:
+                continue  # every pair of this row is skipped
+            n = (hi - lo + LANES) // LANES * LANES
+            last = np.int32(hi - lo)
+            py = py_tab[r]
+            b0 = i01 * py + i02
+            b1 = i11 * py + i12
+            b2 = i21 * py + i22
+            hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
+            sv = st[(r - rt0) * SW + (ca + lo - ct0):]
+            av = ac[lo:]
+            pxv = px_tab[ca + lo:]
+            for lane in range(n):
+                px = pxv[lane]
+                w0, w1, w2, inside = _bary(px, i00, i10, i20, b0, b1, b2, zero, one)
+                # nearest segment, keeping which edge and where on it (t) for the gradient
+                bt, bdx, bdy, d2 = _segment(px, hy0, ax0, ex0, ey0, ie0, zero, one)
+                e1sel, d2, bt, bdx, bdy = _nearer(px, hy1, ax1, ex1, ey1, ie1, zero, one, d2, bt, bdx, bdy)
+                e2sel, d2, bt, bdx, bdy = _nearer(px, hy2, ax2, ex2, ey2, ie2, zero, one, d2, bt, bdx, bdy)
+                e1sel = e1sel & (not e2sel)
+                e0sel = not (e1sel | e2sel)
+                # lanes past hi are pairs the forward masked out (beyond the box)
+                valid = (inside | (d2 < thr)) & (np.int32(lane) <= last)
+                xs = (d2 if inside else -d2) * inv_sigma
+                cov, unc = _coverage(xs, zero, one)
+                wc0, wc1, wc2 = _clip01(w0, w1, w2, zero, one)
+                rsw = wc0 + wc1 + wc2
+                sw = max(rsw, wsum_min)
+                rnum = one / (wc0 * iz0 + wc1 * iz1 + wc2 * iz2)
+                z = sw * rnum
+                rgb = valid & (z >= near) & (z <= far)
+                zn = (far - z) * inv_fr
+                ez = vexp(min(zn - sv[lane], zero) * inv_gamma)
+                wf = cov * ez
+                wf = wf if rgb else zero  # the pair's softmax weight, shifted by the max
+                gw = sv[NLOC + lane] * fr + sv[2 * NLOC + lane] * fg + sv[3 * NLOC + lane] * fb
+                gw = gw - sv[4 * NLOC + lane]  # dL/dweight * sum
+                # dL/dxs: alpha through prod(1 - D), colour through the weight
+                ga = sv[5 * NLOC + lane] * cov
+                gx = (ga if valid else zero) + gw * wf * unc
+                gd = two * gx * inv_sigma
+                gd = gd if inside else -gd  # d(sign d^2)/d(d^2)
+                u, v = gd * bdx, gd * bdy
+                omt = one - bt
+                k0 = (omt if e0sel else zero) + (bt if e2sel else zero)
+                k1 = (omt if e1sel else zero) + (bt if e0sel else zero)
+                k2 = (omt if e2sel else zero) + (bt if e1sel else zero)
+                av[lane] += u * k0
+                av[1 * SW + lane] += v * k0
+                av[2 * SW + lane] += u * k1
+                av[3 * SW + lane] += v * k1
+                av[4 * SW + lane] += u * k2
+                av[5 * SW + lane] += v * k2
+                # depth: zn = (far - z)/(far - near), z = sw / num, num = sum_k wc_k iz_k,
+                # sw = max(sum_k wc_k, wsum_min): with gzr = -dL/dz / num,
+                # dL/dnum = gzr z and dL/dsw = -gzr
+                gzr = gw * wf * inv_gamma * inv_fr * rnum
+                gzr = gzr if rgb else zero
+                # masked after the product: z is inf where float32 rounding clips
+                # all three barycentrics of a sliver face to 0, and 0 * inf is NaN
+                gnum = gzr * z
+                gnum = gnum if rgb else zero
+                zsub = gzr if rsw >= wsum_min else zero
+                gw0 = gnum * iz0 - zsub
+                gw1 = gnum * iz1 - zsub
+                gw2 = gnum * iz2 - zsub
+                # the clamp passes the gradient on [0, 1] (as torch.clamp does)
+                gw0 = gw0 if (w0 >= zero) & (w0 <= one) else zero
+                gw1 = gw1 if (w1 >= zero) & (w1 <= one) else zero
+                gw2 = gw2 if (w2 >= zero) & (w2 <= one) else zero
+                av[6 * SW + lane] += gw0
+                av[7 * SW + lane] += gw1
+                av[8 * SW + lane] += gw2
+                av[9 * SW + lane] += gw0 * py
+                av[10 * SW + lane] += gw1 * py
+                av[11 * SW + lane] += gw2 * py
+                av[12 * SW + lane] += gnum * wc0
+                av[13 * SW + lane] += gnum * wc1
+                av[14 * SW + lane] += gnum * wc2
+                av[15 * SW + lane] += sv[NLOC + lane] * wf
+                av[16 * SW + lane] += sv[2 * NLOC + lane] * wf
+                av[17 * SW + lane] += sv[3 * NLOC + lane] * wf
+        pxa = px_tab[ca:]
+        for j in range(6):
+            grad[entry, j] = _lane_sum(ac[j * SW:], m)
+        for k in range(3):  # barycentric matrix row k: (x, y, 1) coefficients
+            grad[entry, 6 + 3 * k] = _lane_dot(ac[(6 + k) * SW:], pxa, m)
+            grad[entry, 7 + 3 * k] = _lane_sum(ac[(9 + k) * SW:], m)
+            grad[entry, 8 + 3 * k] = _lane_sum(ac[(6 + k) * SW:], m)
+        for j in range(6):
+            grad[entry, 15 + j] = _lane_sum(ac[(12 + j) * SW:], m)
+
+
+@njit(parallel=True, **JIT_OPTS)
+def backward(
+    order, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab,
+    K, image, g_image, g_alpha, st_m, st_s, st_p, row_lo, row_hi, grad,
+):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """The gradient slots ``grad`` (E, N_GRAD) of every tile entry (:func:`_backward_tile`);
+    run under :func:`saucerfab.render.soft_tiles.one_tile_chunks`."""
+    for k in prange(order.shape[0]):
+        old = ftz_on()
+        _backward_tile(
+            order[k], n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col,
+            px_tab, py_tab, K, image, g_image, g_alpha, st_m, st_s, st_p, row_lo, row_hi, grad,
+        )
+        ftz_restore(old)
