@@ -5,7 +5,7 @@
 
 Each hostile file of issue 16 is built at the size the issue measured it
 (sparse files and deflate keep them small on disk; the builders are the
-tests' own, from ``tests/test_check_budgets.py``), then checked by
+tests' own, from ``tests/check/test_check_budgets.py``), then checked by
 ``check_mesh`` with the default limits in a fresh Python process, one per
 file, so that each figure is that file's alone: wall time of ``check_mesh``
 itself and of the whole process, and the process's peak resident memory
@@ -40,6 +40,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))  # the builders live with the tests
+sys.path.insert(0, str(ROOT / "tests" / "check"))  # (test_check_budgets)
 
 import fixtures_check as fx  # noqa: E402
 import test_check_budgets as hb  # noqa: E402

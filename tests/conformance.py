@@ -1,6 +1,6 @@
 """Conformance suites for ``saucerfab check``, and the formats' own reference readers' verdicts.
 
-Used by ``tests/test_conformance.py`` (CI) and ``benchmarks/bench_conformance.py``
+Used by ``tests/check/test_conformance.py`` (CI) and ``benchmarks/bench_conformance.py``
 (the agreement table in ``saucerfab/check/README.md``), so that the test and
 the table count the same way.
 

@@ -215,7 +215,8 @@ def report_html(data: dict[str, Any]) -> str:
     )
     table = (
         "<table><thead><tr><th>job</th><th>kind</th><th>status</th><th>check</th><th>reason</th>"
-        "<th>design s</th><th>export s</th><th>check s</th><th>total s</th><th>print files</th></tr></thead>\n<tbody>\n"
+        + "".join(f'<th style="white-space:nowrap">{h} s</th>' for h in ("design", "export", "check", "total"))
+        + "<th>print files</th></tr></thead>\n<tbody>\n"
         + "\n".join(_job_row(j) for j in data["jobs"])
         + "\n</tbody></table>"
     )

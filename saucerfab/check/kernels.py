@@ -4,7 +4,7 @@ The checker's numpy code (:mod:`saucerfab.check.bvh`, :mod:`saucerfab.check.topo
 is the reference and serves small meshes: importing numba costs about 0.7 s
 of start-up, more than a small file's whole check. Past
 :data:`saucerfab.check.bvh.FAST_FROM_TRIANGLES` triangles the callers switch to these kernels, which give
-the same answers (``tests/test_check_kernels.py`` holds the two together)
+the same answers (``tests/check/test_check_kernels.py`` holds the two together)
 several times faster, without the numpy versions' frontier arrays.
 """
 

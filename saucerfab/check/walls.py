@@ -16,7 +16,7 @@ from saucerfab.check.places import fmt_pt, where
 from saucerfab.check.report import Finding, finding
 
 if TYPE_CHECKING:
-    from saucerfab.fabricate.profiles import PrinterProfile
+    from saucerfab.profiles import PrinterProfile
 
 
 def thin_walls(bvh: BVH, tri: np.ndarray, normals: np.ndarray, areas: np.ndarray, gidx: np.ndarray, diag: float,

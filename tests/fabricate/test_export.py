@@ -40,7 +40,7 @@ from saucerfab.fabricate.pipeline import ExportResult, export_design
 from saucerfab.formats import FORMATS
 from saucerfab.profiles import PrinterProfile, load_profile
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 GLTF_VALIDATOR = ROOT / "tools" / "node" / "node_modules" / "gltf-validator"
 CUP_MM = 30.0
 TEX = 64  # design texture edge; checker cells are TEX / 8 px

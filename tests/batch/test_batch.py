@@ -28,7 +28,7 @@ from saucerfab.cli import main
 from saucerfab.design import save_design, synthetic_design
 from saucerfab.errors import ConfigError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "samples" / "batch"
 DESIGN_JOBS = ["waves-j55", "waves-j850-100mm", "ripples-mimaki", "bowl-j55"]
 RAW_JOBS = ["ring-star", "fish-moon-dome"]

@@ -232,7 +232,7 @@ def test_check_starts_without_torch(files: dict[str, Path]) -> None:
 def test_readme_lists_every_finding_code() -> None:
     from saucerfab.check import CODES
 
-    text = (Path(__file__).resolve().parents[1] / "saucerfab" / "check" / "README.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "saucerfab" / "check" / "README.md").read_text()
     for code, (kind, meaning) in CODES.items():
         assert f"| `{code}` | {kind} | {meaning} |" in text, code
 

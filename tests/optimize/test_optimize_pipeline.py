@@ -14,7 +14,7 @@ from saucerfab.errors import ImageError, ShapeError
 from saucerfab.optimize.pipeline import run_design
 from saucerfab.optimize.request import DesignRequest
 
-SAMPLES = Path(__file__).resolve().parents[1] / "samples"
+SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 SMALL = dict(resolution=24, image_size=64, max_iters=25)
 
 

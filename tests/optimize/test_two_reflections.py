@@ -25,7 +25,7 @@ from saucerfab.optimize.regions import (
 from saucerfab.render.camera import Camera
 from saucerfab.scene import PrismCup, ViewFrame, load_scene
 
-SAMPLES = Path(__file__).resolve().parents[1] / "samples"
+SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 
 
 def prism_scene(n: int = 48):

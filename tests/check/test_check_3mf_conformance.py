@@ -31,7 +31,7 @@ import fixtures_check as fx
 from saucerfab.check import Report, check_mesh
 from saucerfab.check.readers import lib3mf_strict as l3
 
-DATA = Path(__file__).resolve().parent / "data" / "conformance" / "3mf-samples"
+DATA = Path(__file__).resolve().parents[1] / "data" / "conformance" / "3mf-samples"
 MUSTFAIL = sorted((DATA / "MUSTFAIL").glob("*.3mf"))
 MUSTPASS = sorted((DATA / "MUSTPASS").glob("*.3mf"))
 EXAMPLES = sorted((DATA / "examples").glob("*.3mf"))

@@ -21,8 +21,8 @@ from scipy.spatial import cKDTree
 from saucerfab.check import Limits, check_mesh
 from saucerfab.check.readers import draco, meshopt, read_mesh
 
-DATA = Path(__file__).resolve().parent / "data" / "gltf-compressed"
-VALIDATOR = Path(__file__).resolve().parent / "data" / "conformance" / "gltf-validator" / "test"
+DATA = Path(__file__).resolve().parents[1] / "data" / "gltf-compressed"
+VALIDATOR = Path(__file__).resolve().parents[1] / "data" / "conformance" / "gltf-validator" / "test"
 UNREADABLE_OK = {"malformed", "truncated", "over_check_limit", "index_out_of_range", "unsupported_format",
                  "no_triangles"}
 

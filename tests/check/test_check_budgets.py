@@ -411,7 +411,7 @@ def test_glb_json_with_millions_of_values_is_refused_before_parsing(tmp_path: Pa
 
 def test_every_budget_is_a_documented_limit() -> None:
     """Each budget is a Limits field named in the checker's README (the messages name them too)."""
-    readme = (Path(__file__).resolve().parents[1] / "saucerfab" / "check" / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[2] / "saucerfab" / "check" / "README.md").read_text()
     for name in ("max_node_visits", "max_buffer_bytes", "max_inflation_ratio", "free_inflation_bytes",
                  "max_total_texture_pixels", "max_total_texture_bytes", "max_xml_elements", "max_json_values",
                  "max_vrml_tokens", "max_uncompressed_bytes"):

@@ -30,7 +30,7 @@ from saucerfab.batch.manifest import parse_options_cell
 from saucerfab.cli import main
 from saucerfab.errors import ConfigError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "samples" / "batch"
 
 HEAD = '[defaults]\nprinter = "j55"\ncup_diameter_mm = 80\n\n'

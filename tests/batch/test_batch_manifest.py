@@ -10,7 +10,7 @@ import pytest
 from saucerfab.batch.manifest import load_manifest, parse_options_cell, resolve_inside
 from saucerfab.errors import ConfigError
 
-SAMPLES = Path(__file__).resolve().parents[1] / "samples" / "batch"
+SAMPLES = Path(__file__).resolve().parents[2] / "samples" / "batch"
 
 
 def _write(folder: Path, name: str, text: str) -> Path:

@@ -27,7 +27,7 @@ from saucerfab.verify.core import FULL_COVERAGE, resize_box
 from saucerfab.verify.eyes import eye_positions
 from saucerfab.verify.metrics import PSNR_CAP_DB, best_shift, psnr, shifted, ssim
 
-SAMPLES = Path(__file__).resolve().parents[1] / "samples"
+SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 RES = 96
 
 

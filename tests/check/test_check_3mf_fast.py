@@ -316,7 +316,7 @@ def test_counts_over_limits_same_verdict(tmp_path: Path, monkeypatch: pytest.Mon
 
 
 def test_conformance_samples_read_the_same(monkeypatch: pytest.MonkeyPatch) -> None:
-    data = Path(__file__).resolve().parent / "data" / "conformance" / "3mf-samples"
+    data = Path(__file__).resolve().parents[1] / "data" / "conformance" / "3mf-samples"
     files = sorted(data.rglob("*.3mf"))
     assert files
     total = 0
