@@ -499,7 +499,7 @@ def _resize_plane(plane: np.ndarray, width: int, height: int) -> np.ndarray:
 FITS = ("pad", "crop")
 
 
-def fit_box(width: int, height: int, frame_w: int, frame_h: int, fit: str = "pad") -> tuple[int, int, int, int]:
+def fit_box(width: int, height: int, frame_w: int, frame_h: int, fit: str = FITS[0]) -> tuple[int, int, int, int]:
     """Where the fit rule puts a ``width`` x ``height`` image in a frame.
 
     ``pad``: scale ``min(frame_w / width, frame_h / height)``, so the whole
@@ -538,7 +538,7 @@ def _fit_into(
     frame_w: int,
     frame_h: int,
     background: np.ndarray,
-    fit: str = "pad",
+    fit: str = FITS[0],
 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """The fit rule into a ``frame_w`` x ``frame_h`` frame (see the module docstring)."""
     src_h, src_w = rgb.shape[:2]
@@ -582,7 +582,7 @@ def fit_square(
     size: int,
     *,
     background: Sequence[float] | str | None = None,
-    fit: str = "pad",
+    fit: str = FITS[0],
 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """Fit an image into the ``size`` x ``size`` view frame (the fit rule).
 
@@ -604,7 +604,7 @@ def fit_square(
     return _fit_into(rgb, alpha, int(size), int(size), bg, fit)
 
 
-def fit_plane(plane: np.ndarray, frame_w: int, frame_h: int, fit: str = "pad") -> np.ndarray:
+def fit_plane(plane: np.ndarray, frame_w: int, frame_h: int, fit: str = FITS[0]) -> np.ndarray:
     """One (H, W) float plane (a mask's coverage) put through the fit rule.
 
     Lanczos-resized to its :func:`fit_box` and placed in the frame; the

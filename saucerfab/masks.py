@@ -26,6 +26,7 @@ from saucerfab.fileio import sha256_file
 from saucerfab.images import (
     DEFAULT_MAX_BYTES,
     DEFAULT_MAX_PIXELS,
+    FITS,
     LoadedImage,
     ViewImage,
     border_ring,
@@ -195,7 +196,7 @@ def _mask_in_frame(
     method: str,
     max_pixels: int,
     max_bytes: int,
-    fit: str = "pad",
+    fit: str = FITS[0],
 ) -> tuple[np.ndarray, str]:
     """Foreground mask (H, W) bool of an image in its frame, and the method used."""
     if method not in MASK_METHODS:
@@ -304,7 +305,7 @@ def prepare_image(
     max_pixels: int = DEFAULT_MAX_PIXELS,
     max_bytes: int = DEFAULT_MAX_BYTES,
     loaded: LoadedImage | None = None,
-    fit: str = "pad",
+    fit: str = FITS[0],
 ) -> ViewImage:
     """Load, fit into the ``size`` x ``size`` frame and mask one input image.
 

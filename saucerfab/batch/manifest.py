@@ -215,7 +215,7 @@ def _options(value: Any, where: str) -> dict[str, Any]:
 
 def _build_job(raw: dict[str, Any], root: Path, where: str) -> JobSpec:
     """A :class:`JobSpec` from one job's plain data (defaults merged already)."""
-    from saucerfab.formats import FORMATS
+    from saucerfab.formats import FORMATS, WRITERS, lookup
     from saucerfab.scene import PRESETS
 
     unknown = set(raw) - JOB_KEYS
@@ -261,10 +261,12 @@ def _build_job(raw: dict[str, Any], root: Path, where: str) -> JobSpec:
         formats_raw = [f for f in re.split(r"[\s;,|]+", formats_raw) if f]
     if not isinstance(formats_raw, (list, tuple)) or not all(isinstance(f, str) for f in formats_raw):
         raise ConfigError(f"{where}: 'formats' must be a list of format names, got {formats_raw!r}")
-    formats = tuple(dict.fromkeys(f.lower().lstrip(".") for f in formats_raw))
-    bad = [f for f in formats if f not in FORMATS]
+    # a name --formats takes (any case, a leading dot, an alias such as vrml) is the same here
+    named = [(f, lookup(f)) for f in formats_raw]
+    bad = [f for f, fmt in named if fmt is None or fmt.key not in WRITERS]
     if bad:
         raise ConfigError(f"{where}: unknown format(s) {bad}; known: {list(FORMATS)}")
+    formats = tuple(dict.fromkeys(fmt.key for _, fmt in named if fmt is not None))
 
     has_design = raw.get("design") not in (None, "")
     has_raw = any(raw.get(k) not in (None, "") for k in (*IMAGE_ROLES, "shape", "scene", "cup"))

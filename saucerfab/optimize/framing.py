@@ -33,8 +33,12 @@ import numpy as np
 
 from saucerfab.errors import ConfigError
 from saucerfab.heightfield import make_grid
+from saucerfab.optimize.request import FRAMES
 from saucerfab.render.camera import Camera
 from saucerfab.scene import Scene, ViewFrame
+
+#: the frames this module fits (the request's choices but "scene", which keeps the scene's own)
+FITTED_FRAMES = tuple(m for m in FRAMES if m != "scene")
 
 #: cells across the region's bounding box when finding the largest square inside it ("inscribed")
 INSCRIBED_CELLS = 160
@@ -114,8 +118,8 @@ def fit_frames(
     """
     from saucerfab.mirror import reflect
 
-    if mode not in ("contain", "cover", "inscribed"):
-        raise ConfigError(f"frames mode must be 'contain', 'cover' or 'inscribed', got {mode!r}")
+    if mode not in FITTED_FRAMES:
+        raise ConfigError(f"frames mode must be one of {', '.join(FITTED_FRAMES)}, got {mode!r}")
     grid = make_grid(scene.saucer)
     h = np.asarray(heights, np.float64).reshape(-1)
     direct = _refit(Camera.from_scene(scene, "direct"), grid.vertices(h), mode)

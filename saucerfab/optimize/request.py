@@ -15,6 +15,7 @@ from pathlib import Path
 
 from saucerfab.errors import ConfigError
 from saucerfab.heightfield import HEIGHT_SCALE
+from saucerfab.images import FITS
 from saucerfab.optimize.energies import WEIGHTS
 from saucerfab.optimize.stages import ABLATION_STAGES, MAX_ITERS
 from saucerfab.profiles import DEFAULT_PRINTER
@@ -140,7 +141,7 @@ class DesignRequest(_Weights):
     ablation: str = "full"
     frames: str = FRAMES[0]
     enhancement: str = ENHANCEMENTS[0]
-    fit: str = "pad"
+    fit: str = FITS[0]
     background: str | None = None
     printer: str = DEFAULT_PRINTER
     cup_diameter_mm: float | None = None
@@ -154,13 +155,11 @@ class DesignRequest(_Weights):
         Raises:
             ConfigError: not ``pad``, ``crop`` or ``VIEW=RULE,...`` with known views and rules.
         """
-        from saucerfab.images import FITS
-
         views = VIEW_NAMES
         text = str(self.fit).strip().lower()
         if text in FITS:
             return dict.fromkeys(views, text)
-        out = dict.fromkeys(views, "pad")
+        out = dict.fromkeys(views, FITS[0])
         for part in text.split(","):
             view, _, rule = part.partition("=")
             if view.strip() not in views or rule.strip() not in FITS:

@@ -225,6 +225,16 @@ def test_csv_manifest(tmp_path: Path) -> None:
         load_manifest(_write(tmp_path, "bad.csv", "id,design,colour\na,d,red\n"))
 
 
+def test_formats_are_named_as_on_the_command_line(tmp_path: Path) -> None:
+    """The names --formats takes (any case, a leading dot, the vrml alias) mean the same in a manifest."""
+    _inputs(tmp_path)
+    text = "id,design,printer,cup_diameter_mm,formats\none,d,j55,80,VRML;.3mf;wrl\n"
+    (job,) = load_manifest(_write(tmp_path, "m.csv", text)).jobs
+    assert job.formats == ("wrl", "3mf")
+    with pytest.raises(ConfigError, match=r"unknown format\(s\) \['gltf'\]"):
+        load_manifest(_write(tmp_path, "bad.csv", "id,design,printer,cup_diameter_mm,formats\none,d,j55,80,gltf\n"))  # checked, not written
+
+
 def test_options_cell() -> None:
     assert parse_options_cell("a=1; b = 2.5 ;c=true; d=word", "w") == {"a": 1, "b": 2.5, "c": True, "d": "word"}
     with pytest.raises(ConfigError, match="not key=value"):
