@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from saucerfab.optimize.looks import Look
 
 HELP = "optimize a saucer: direct + reflected image and a base shape -> design folder"
 
@@ -167,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_folder(Path(args.out), force=args.force)
     req = DesignRequest(**given)
     quiet = (lambda *a: None) if args.quiet else None
-    out = run_design(req, args.out, progress=quiet)
+    out = run_design(req, args.out, progress=quiet, look=None if args.quiet else _first_look_line(args))
     import json
 
     meta = json.loads((out / "design.json").read_text())
@@ -219,6 +223,23 @@ def run(args: argparse.Namespace) -> int:
                   f"{'' if v.passed else '  LOW'}")
     print(f"  previews: {out / 'previews'}; report: {out / 'report.html'}")
     return 0
+
+
+def _first_look_line(args: argparse.Namespace) -> Look:
+    """A look callback that prints one stderr line for the first look: seconds since the command started."""
+    import sys
+    import time
+    from pathlib import Path
+
+    started = getattr(args, "_started", None)
+
+    def look(stage: str, files: dict[str, Path], elapsed_s: float) -> None:
+        if stage == "first_look" and files:
+            since = time.perf_counter() - started if started is not None else elapsed_s
+            folder = next(iter(files.values())).parent
+            print(f"first look after {since:.1f} s: {folder}", file=sys.stderr, flush=True)
+
+    return look
 
 
 def _verify(out, printer: str, args: argparse.Namespace):  # type: ignore[no-untyped-def]

@@ -10,6 +10,10 @@
 3. texturing with the final shape (section 3.4.2);
 4. metrics, previews and the design folder, written atomically.
 
+Looks (:mod:`saucerfab.optimize.looks`): a first look right after step 1,
+before torch is imported, and a refined one after every stage, written
+into the checkpoint folder and handed to the ``look`` callback.
+
 Checkpoints: after every stage, and on Ctrl-C, the iterate is saved in a
 sibling folder ``.<out name>.checkpoint``; running the same request again
 resumes from it (the request's hash must match). A finished run removes it.
@@ -34,6 +38,7 @@ from saucerfab.design import Design, FaceView, save_design
 from saucerfab.errors import ConfigError, Interrupted, OutputError
 from saucerfab.fileio import write_bytes_atomic
 from saucerfab.optimize.energies import WEIGHTS
+from saucerfab.optimize.looks import Look, Looks
 from saucerfab.optimize.prepare import Prepared, prepare
 from saucerfab.optimize.printable import PrintTarget
 from saucerfab.optimize.request import DesignRequest
@@ -162,6 +167,7 @@ def run_design(
     *,
     progress: Progress | None = None,
     log_every_s: float = 2.0,
+    look: Look | None = None,
 ) -> Path:
     """Run the whole method and write the design folder ``out`` atomically.
 
@@ -170,27 +176,37 @@ def run_design(
         out: the design folder to write (replaced atomically if it exists).
         progress: called with (stage, iteration, max, energies, elapsed) about
             every ``log_every_s`` seconds; default prints a line to stderr.
+        look: called as ``look(stage, files, elapsed_s)`` after each look is
+            written (:mod:`saucerfab.optimize.looks`): ``"first_look"`` (the base
+            shape with projected colours, before any optimisation), then each
+            stage's name; ``files`` maps each view and ``"composite"`` to its PNG
+            in the checkpoint folder's ``previews/``; ``elapsed_s`` counts from
+            the call of run_design. An exception it raises is reported and ignored.
 
     Raises:
         SaucerfabError: bad inputs (before any work), Interrupted on Ctrl-C
         (after saving a checkpoint).
     """
-    import torch
-
-    from saucerfab.optimize.views import Rig
-
     out = Path(out)
     t_start = time.perf_counter()
     check_output_folder(out)
     prep = prepare(request)
-    torch.manual_seed(request.seed)
-    rig = Rig(prep.scene, prep.base, reflected_groups=prep.reflected_groups)
     stages = ABLATION_STAGES[request.ablation]
     if prep.enhancement and prep.enhancement["strategy"] == "none":
         stages = without_enhancement(stages)
     ckpt = _Checkpoint(out, request_hash(request, prep))
     for note in prep.print_notes:
         print(f"  note: {note}", file=sys.stderr)
+    # the first look, before torch is imported, rho and any stage: what the saucer shows before optimisation
+    looks = Looks(ckpt.dir / "previews", look, t_start)
+    looks.first(prep, stages[0].targets)
+
+    import torch
+
+    from saucerfab.optimize.views import Rig
+
+    torch.manual_seed(request.seed)
+    rig = Rig(prep.scene, prep.base, reflected_groups=prep.reflected_groups)
     loop = _StageLoop(request, prep, rig, stages, progress or _print_progress, log_every_s, t_start)
 
     first = 0
@@ -224,6 +240,7 @@ def run_design(
             ) from None
         ckpt.save(si + 1, h.numpy(), c.numpy(), loop.log, loop.metrics, loop.weights,
                   earlier_s + time.perf_counter() - t_start)
+        looks.show(stages[si].name, prep.scene, rig, h.numpy(), c.numpy())  # the refined look
 
     design, previews, energy_log = loop.finish(h, c)
     metrics = loop.metrics

@@ -20,17 +20,18 @@ rendered the same way (so pixels no saucer covers count for nothing).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
 
 from saucerfab.design import Design
 from saucerfab.render.camera import Camera
 
 if TYPE_CHECKING:
     from saucerfab.optimize.prepare import Prepared
-    from saucerfab.optimize.views import Rig
+    from saucerfab.optimize.views import Rig, View, ViewMesh, ViewMeshes
+    from saucerfab.scene import Scene
 
 CUP_GREY = np.array([0.80, 0.82, 0.85])
 BACKDROP = np.array([0.97, 0.97, 0.97])
@@ -51,9 +52,13 @@ def cup_mesh(cup, segments: int = 96) -> tuple[np.ndarray, np.ndarray]:  # type:
 
 def composite_camera(design: Design, size: int) -> Camera:
     """A camera at the viewer's eye framing both the saucer and the cup."""
-    scene = design.scene
+    return scene_composite_camera(design.scene, design.heights, size)
+
+
+def scene_composite_camera(scene: "Scene", heights: np.ndarray, size: int) -> Camera:
+    """A camera at the viewer's eye framing the saucer (heights (N, N), model units) and the cup; size x size px."""
     (x0, x1), (y0, y1) = scene.saucer.x_range, scene.saucer.y_range
-    zmax = float(design.heights.max())
+    zmax = float(heights.max())
     pts = [[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in (0.0, zmax)]
     outline = scene.cup.boundary(32)
     pts += [[p[0], p[1], z] for p in outline for z in (0.0, scene.cup.height)]
@@ -67,6 +72,8 @@ def composite_camera(design: Design, size: int) -> Camera:
 
 
 def _textured(verts: np.ndarray, faces: np.ndarray, uvs: np.ndarray, texture: np.ndarray, cam: Camera) -> np.ndarray:
+    import torch
+
     from saucerfab.render import render_textured
 
     img = render_textured(
@@ -79,7 +86,7 @@ def _textured(verts: np.ndarray, faces: np.ndarray, uvs: np.ndarray, texture: np
 def _hard(verts: np.ndarray, faces: np.ndarray, cam: Camera) -> tuple[np.ndarray, np.ndarray]:
     from saucerfab.render import rasterize_hard
 
-    fid, _, depth = rasterize_hard(torch.as_tensor(verts), torch.as_tensor(faces), cam)
+    fid, _, depth = rasterize_hard(verts, faces, cam)
     return np.asarray(fid), np.asarray(depth)
 
 
@@ -99,13 +106,30 @@ def view_images(design: Design, rig: "Rig", size: int | None = None) -> dict[str
 
 def composite_image(design: Design, rig: "Rig", size: int = 768) -> np.ndarray:
     """What the viewer sees: saucer, cup wall, and the reflection in it. (S, S, 3) float."""
-    cam = composite_camera(design, size)
-    h = design.heights.reshape(-1)
+
+    def paint(view: "View", verts: np.ndarray, faces: np.ndarray, cam: Camera) -> tuple[np.ndarray, ...]:
+        uvs = design.face_uvs if view.identity else design.face_uvs[view.face_src.numpy()]
+        return (_textured(verts, faces, uvs, design.texture, cam), *_hard(verts, faces, cam))
+
+    return compose(design.scene, rig, design.heights, composite_camera(design, size), paint)
+
+
+#: paint(view, vertices (V', 3), faces (F', 3), camera) -> (image (S, S, 3), face id (S, S), depth (S, S))
+Paint = Callable[["ViewMesh", np.ndarray, np.ndarray, Camera], tuple[np.ndarray, ...]]
+
+
+def compose(scene: "Scene", rig: "ViewMeshes", heights: np.ndarray, cam: Camera, paint: Paint) -> np.ndarray:
+    """The composite of a saucer with heights (N, N) (model units) as ``paint`` colours each view's mesh.
+
+    The backdrop, the cup wall in grey, the reflected views where the cup
+    is (a mirror reflects ~92%), and the saucer in front. (S, S, 3) float in [0, 1].
+    """
+    size = cam.image_size
+    h = heights.reshape(-1)
     direct = rig.view("direct")
-    sv, sf = direct.vertices_np(h), direct.faces.numpy()
-    saucer = _textured(sv, sf, design.face_uvs, design.texture, cam)
-    s_id, s_depth = _hard(sv, sf, cam)
-    cv, cf = cup_mesh(design.scene.cup)
+    sv, sf = direct.vertices_np(h), np.asarray(direct.faces)
+    saucer, s_id, s_depth = paint(direct, sv, sf, cam)
+    cv, cf = cup_mesh(scene.cup)
     c_id, c_depth = _hard(cv, cf, cam)
     img = np.tile(BACKDROP, (size, size, 1))
     cup_px = c_id >= 0
@@ -113,9 +137,8 @@ def composite_image(design: Design, rig: "Rig", size: int = 768) -> np.ndarray:
     for view in rig.views[1:]:
         if view.faces.shape[0] == 0:
             continue
-        rv, rf = view.vertices_np(h), view.faces.numpy()
-        refl = _textured(rv, rf, design.face_uvs[view.face_src.numpy()], design.texture, cam)
-        r_id, _ = _hard(rv, rf, cam)
+        rv, rf = view.vertices_np(h), np.asarray(view.faces)
+        refl, r_id, _ = paint(view, rv, rf, cam)
         m = cup_px & (r_id >= 0)
         img[m] = 0.92 * refl[m] + 0.08 * CUP_GREY  # a mirror reflects ~92%
     sauc_px = (s_id >= 0) & (~cup_px | (s_depth < c_depth))
@@ -149,6 +172,8 @@ def make_previews(
     design: Design, rig: "Rig", prep: "Prepared", colors: np.ndarray, log: list[dict[str, Any]]
 ) -> tuple[dict[str, bytes], dict[str, float]]:
     """PNG previews (name -> bytes) and the final metrics."""
+    import torch
+
     from saucerfab import report
     from saucerfab.optimize.stages import SIGMA_SMALL
 

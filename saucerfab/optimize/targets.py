@@ -16,10 +16,14 @@ colouring seen in the mirror, and the reflected-image colouring seen directly.
 
 from __future__ import annotations
 
-import numpy as np
-import torch
+from typing import TYPE_CHECKING
 
-from saucerfab.optimize.views import Rig, View, visible_faces
+import numpy as np
+
+from saucerfab.optimize.views import Rig, ViewMesh, ViewMeshes, visible_faces
+
+if TYPE_CHECKING:
+    import torch
 
 
 def sample_bilinear(image: np.ndarray, px: np.ndarray) -> np.ndarray:
@@ -40,7 +44,7 @@ def sample_bilinear(image: np.ndarray, px: np.ndarray) -> np.ndarray:
 
 
 def project_colors(
-    view: View,
+    view: ViewMesh,
     heights: np.ndarray,
     image: np.ndarray,
     num_faces: int,
@@ -60,7 +64,7 @@ def project_colors(
 
     cam = view.camera.with_size(image.shape[0])
     verts = view.vertices_np(np.asarray(heights).reshape(-1))
-    faces = view.faces.numpy()
+    faces = np.asarray(view.faces)
     out = np.tile(np.asarray(fill, np.float64), (num_faces, 1))
     if faces.shape[0] == 0:
         return out
@@ -68,9 +72,7 @@ def project_colors(
     cen = ndc[faces].mean(axis=1)
     px = cam.ndc_to_pixel(cen[:, :2])
     colors = sample_bilinear(image, px)
-    face_id, _, _ = rasterize_hard(
-        torch.as_tensor(verts), torch.as_tensor(faces), cam
-    )
+    face_id, _, _ = rasterize_hard(verts, faces, cam)
     fid = np.asarray(face_id).reshape(-1)
     hit = fid >= 0
     if hit.any():
@@ -82,7 +84,7 @@ def project_colors(
         )
         covered = counts > 0
         colors[covered] = sums[covered] / counts[covered, None]
-    out[view.face_src.numpy()] = colors
+    out[np.asarray(view.face_src)] = colors
     return out
 
 
@@ -92,15 +94,19 @@ def blur_matched_targets(
     images: dict[str, np.ndarray],
     sigma: float,
     *,
-    dtype: torch.dtype = torch.float32,
+    dtype: torch.dtype | None = None,
 ) -> dict[str, torch.Tensor]:
     """Render each view's input image through the soft rasterizer on ``heights``.
 
     Args:
         images: view name -> (S, S, 3) image in [0, 1] (the fitted input or its enhancement).
+        dtype: the targets' dtype (default float32).
     Returns:
         view name -> (S, S, 3) target tensor.
     """
+    import torch
+
+    dtype = dtype or torch.float32
     h = torch.as_tensor(np.asarray(heights).reshape(-1), dtype=dtype)
     out: dict[str, torch.Tensor] = {}
     for view in rig.views:
@@ -119,7 +125,7 @@ def compatibility(
     sigma: float,
     *,
     background: tuple[float, float, float] = (0.0, 0.5, 1.0),
-    dtype: torch.dtype = torch.float32,
+    dtype: torch.dtype | None = None,
 ) -> float:
     """The compatibility score rho of the inputs and the base shape (section 3.5).
 
@@ -133,6 +139,9 @@ def compatibility(
 
     With two reflected images, each reflected view contributes its own term.
     """
+    import torch
+
+    dtype = dtype or torch.float32
     h = torch.as_tensor(np.asarray(heights).reshape(-1), dtype=dtype)
     direct = rig.view("direct")
     col_d = project_colors(direct, heights, enhanced["direct"], rig.num_faces, background)
@@ -147,7 +156,7 @@ def compatibility(
     return rho
 
 
-def projected_colors(rig: Rig, heights: np.ndarray, images: dict[str, np.ndarray]) -> np.ndarray:
+def projected_colors(rig: ViewMeshes, heights: np.ndarray, images: dict[str, np.ndarray]) -> np.ndarray:
     """Per-face colours (F, 3) from the texturing step's rule (section 3.4.2).
 
     A face seen only directly takes the direct image's colour, one seen only

@@ -16,21 +16,24 @@ in height, so the face sets stay fixed during a stage.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
 
 from saucerfab.heightfield import make_grid, triangulate
 from saucerfab.render.camera import Camera
 from saucerfab.scene import Scene
+
+if TYPE_CHECKING:
+    import torch
 
 #: the rendered images' background (where no face covers a pixel)
 BACKGROUND = (1.0, 1.0, 1.0)
 
 
 @dataclass
-class View:
-    """One rendered view.
+class ViewMesh:
+    """One view's mesh, as numpy arrays (:class:`View`: the same as torch tensors).
 
     Attributes:
         name: "direct", "reflected" or "reflected2".
@@ -43,15 +46,27 @@ class View:
 
     name: str
     camera: Camera
-    xy: torch.Tensor
-    vert_src: torch.Tensor
-    faces: torch.Tensor
-    face_src: torch.Tensor
+    xy: np.ndarray | torch.Tensor
+    vert_src: np.ndarray | torch.Tensor
+    faces: np.ndarray | torch.Tensor
+    face_src: np.ndarray | torch.Tensor
     #: the direct view takes every vertex and face in order: no gather needed
     identity: bool = False
 
+    def vertices_np(self, h: np.ndarray) -> np.ndarray:
+        """(V', 3) float64 vertices for saucer heights ``h`` ((N, N) or (V,), model units)."""
+        z = np.asarray(h, np.float64).reshape(-1)[np.asarray(self.vert_src), None]
+        return np.concatenate([np.asarray(self.xy).astype(np.float64), z], axis=1)
+
+
+@dataclass
+class View(ViewMesh):
+    """One rendered view: a :class:`ViewMesh` whose arrays are torch tensors (on the CPU)."""
+
     def vertices(self, h: torch.Tensor) -> torch.Tensor:
         """(V', 3) vertices for saucer heights ``h`` (V,)."""
+        import torch
+
         hv = h if self.identity else h.index_select(0, self.vert_src)
         return torch.cat([self.xy.to(h.dtype), hv.unsqueeze(1)], dim=1)
 
@@ -63,15 +78,12 @@ class View:
         """
         return c if self.identity else c.index_select(0, self.face_src)
 
-    def vertices_np(self, h: np.ndarray) -> np.ndarray:
-        return np.concatenate(
-            [self.xy.numpy().astype(np.float64), np.asarray(h, np.float64).reshape(-1)[self.vert_src.numpy(), None]],
-            axis=1,
-        )
 
+class ViewMeshes:
+    """The saucer's views for one scene and resolution as numpy meshes (the torch-free part of :class:`Rig`).
 
-class Rig:
-    """The saucer's views for one scene and resolution.
+    What the first look renders before torch is imported; :class:`Rig` is
+    built from one and has the same attributes, its views as torch tensors.
 
     Args:
         scene: the scene (its saucer resolution sets N).
@@ -103,16 +115,8 @@ class Rig:
         size_d = image_size or scene.direct.image_size
         size_r = image_size or scene.reflected.image_size
         cam_d = Camera.from_scene(scene, "direct").with_size(size_d)
-        self.views: list[View] = [
-            View(
-                "direct",
-                cam_d,
-                torch.as_tensor(xy),
-                torch.arange(nv),
-                torch.as_tensor(self.faces_np),
-                torch.arange(nf),
-                identity=True,
-            )
+        self.views: list[Any] = [
+            ViewMesh("direct", cam_d, xy, np.arange(nv), self.faces_np, np.arange(nf), identity=True)
         ]
         pieces = reflect(scene, xy)
         self.pieces = pieces
@@ -145,21 +149,42 @@ class Rig:
             if not faces:
                 xs, srcs, faces, fsrc = [np.zeros((0, 2))], [np.zeros(0, np.int64)], [np.zeros((0, 3), np.int64)], [np.zeros(0, np.int64)]
             self.views.append(
-                View(
+                ViewMesh(
                     name,
                     Camera.from_scene(scene, name).with_size(size_r),
-                    torch.as_tensor(np.concatenate(xs)),
-                    torch.as_tensor(np.concatenate(srcs)),
-                    torch.as_tensor(np.concatenate(faces)),
-                    torch.as_tensor(np.concatenate(fsrc)),
+                    np.concatenate(xs),
+                    np.concatenate(srcs),
+                    np.concatenate(faces),
+                    np.concatenate(fsrc),
                 )
             )
+        self.views = [self._finish(v) for v in self.views]
 
-    def view(self, name: str) -> View:
+    def _finish(self, mesh: ViewMesh) -> Any:
+        """A view as this class keeps it (numpy here; :class:`Rig`: torch tensors)."""
+        return mesh
+
+    def view(self, name: str) -> Any:
+        """The view called ``name`` (a :class:`ViewMesh`; a :class:`View` in a :class:`Rig`)."""
         for v in self.views:
             if v.name == name:
                 return v
         raise KeyError(name)
+
+
+class Rig(ViewMeshes):
+    """The saucer's views for one scene and resolution, as torch tensors to render.
+
+    Args: as :class:`ViewMeshes`.
+    """
+
+    views: list[View]
+
+    def _finish(self, mesh: ViewMesh) -> View:
+        import torch
+
+        return View(mesh.name, mesh.camera, torch.as_tensor(mesh.xy), torch.as_tensor(mesh.vert_src),
+                    torch.as_tensor(mesh.faces), torch.as_tensor(mesh.face_src), identity=mesh.identity)
 
     def render(
         self,
@@ -202,7 +227,7 @@ class Rig:
         return m
 
 
-def visible_faces(rig: Rig, heights: np.ndarray, supersample: int = 2) -> dict[str, np.ndarray]:
+def visible_faces(rig: ViewMeshes, heights: np.ndarray, supersample: int = 2) -> dict[str, np.ndarray]:
     """Per view, (F,) bool: saucer faces that cover a (super)sample in that view."""
     from saucerfab.render import rasterize_hard
 
@@ -212,9 +237,9 @@ def visible_faces(rig: Rig, heights: np.ndarray, supersample: int = 2) -> dict[s
         vis = np.zeros(rig.num_faces, bool)
         if view.faces.shape[0]:
             cam = view.camera.with_size(view.camera.image_size * supersample)
-            fid, _, _ = rasterize_hard(torch.as_tensor(view.vertices_np(h)), view.faces, cam)
+            fid, _, _ = rasterize_hard(view.vertices_np(h), view.faces, cam)
             ids = np.unique(np.asarray(fid))
             ids = ids[ids >= 0]
-            vis[view.face_src.numpy()[ids]] = True
+            vis[np.asarray(view.face_src)[ids]] = True
         out[view.name] = vis
     return out
