@@ -10,7 +10,7 @@ the height field first learns where the subjects go.
 * three views (multi-reflection): :func:`solid_colour_targets`, subjects red,
   green and blue, backgrounds white.
 
-The masks come from :func:`saucerfab.images.foreground_mask`.
+The masks come from :func:`saucerfab.masks.foreground_mask`.
 """
 
 from __future__ import annotations
