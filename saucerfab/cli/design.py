@@ -23,6 +23,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         DesignRequest,
     )
 
+    from saucerfab.cups import CUP_SPEC_USAGE
     from saucerfab.scene import paper_scene
 
     default = DesignRequest.default
@@ -34,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--height-scale", type=float,
                    help=f"model units per unit of a shape file (default {default('height_scale')})")
     p.add_argument("--scene", help=f"scene TOML or preset (default: {default('scene')})")
-    p.add_argument("--cup", help="cup override: circle[:R], ellipse:A,B[,ROT], prism:N[,R[,ROT]]")
+    p.add_argument("--cup", help=f"cup override: {CUP_SPEC_USAGE}")
     p.add_argument(
         "--printer",
         help="printer the design is made for: a profile name (see 'saucerfab printers') or a .toml; the "
