@@ -14,7 +14,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(PY) -m pip
 STAMP   = $(VENV)/.installed
 
-.PHONY: install demo test bench clean tools
+.PHONY: install demo test bench clean tools studio
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -35,6 +35,10 @@ tools:
 
 demo: install
 	$(PY) -m saucerfab.demo --out out/demo
+
+# the studio: a local web page for designers (http://127.0.0.1:8000, workspace ~/saucerfab-studio)
+studio: install
+	$(PY) -m saucerfab studio
 
 test: install tools
 	$(PY) -m pytest -n 2 -q tests

@@ -121,6 +121,24 @@ def _made_for(target: Mapping[str, Any] | None, printable: Mapping[str, Any] | N
             + ("none is left under them" if not left else f"{left} crest vertices are still under them"))
 
 
+def design_viewer_section(design: Design, view_d: dict[str, Any] | None = None) -> Section:
+    """The orbitable 3D view of a design's saucer top and its mirror cup (the design report's; the studio's viewer).
+
+    Args:
+        design: the design.
+        view_d: its viewing dict in mm (:func:`saucerfab.fabricate.scene_json.viewing_dict`), when already made.
+    """
+    from saucerfab.fabricate.scene_json import viewing_dict
+
+    s = design.scene.mm_per_unit
+    if view_d is None:
+        view_d = viewing_dict(design.scene, np.diag([s, s, s, 1.0]))
+    return _viewer_section(
+        _glb(design.vertices() * s, design.faces(), design.face_uvs.astype(np.float64), design.texture), view_d,
+        "the designed saucer top (before it is made a solid) and the cup",
+    )
+
+
 def design_report(design: Design, previews: Mapping[str, bytes], folder: Path | None = None) -> str:
     """The HTML page of a design folder (titled by its input pictures, so it does not depend on the folder's name).
 
@@ -164,10 +182,7 @@ def design_report(design: Design, previews: Mapping[str, bytes], folder: Path | 
         "saucerfab": __version__,
     }
     sections = [Section("Design", table=summary)]
-    sections.append(_viewer_section(
-        _glb(design.vertices() * s, design.faces(), design.face_uvs.astype(np.float64), design.texture), view_d,
-        "the designed saucer top (before it is made a solid) and the cup",
-    ))
+    sections.append(design_viewer_section(design, view_d))
     refs = [(f"{v} picture as meant", _png(img, 512)) for v, img in design.references.items()]
     targets = pic("inputs_targets.png")
     sections.append(Section(

@@ -18,7 +18,8 @@ import atexit
 import io
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -205,6 +206,35 @@ def open_page(
     finally:
         context.close()
     return PageResult(errors, warnings, ready, shot, pngs, info, interaction, seconds)
+
+
+@contextmanager
+def live_page(viewport: tuple[int, int] = (1280, 900), **context_args: Any) -> Iterator[tuple[Any, list[str]]]:
+    """A fresh page of the shared browser for a page served over HTTP (``open_page`` opens files).
+
+    Yields ``(page, errors)``: the Playwright page (navigate it yourself) and
+    the list its console errors, uncaught page errors and failed requests
+    are appended to as they come, from every frame of the page, each a line
+    ``"console.error: ..."``, ``"uncaught: ..."`` or ``"request failed: URL (why)"``.
+    ``context_args`` go to ``browser.new_context`` (e.g. ``accept_downloads=True``).
+    The page's context is closed on exit.
+
+    Raises:
+        BrowserUnavailable: no Chromium or no Playwright.
+    """
+    browser = _browser()
+    context = browser.new_context(
+        viewport={"width": viewport[0], "height": viewport[1]}, device_scale_factor=1, **context_args
+    )
+    errors: list[str] = []
+    try:
+        page = context.new_page()
+        page.on("console", lambda msg: errors.append(f"console.error: {msg.text}") if msg.type == "error" else None)
+        page.on("pageerror", lambda exc: errors.append(f"uncaught: {exc}"))
+        page.on("requestfailed", lambda req: errors.append(f"request failed: {req.url[:200]} ({req.failure})"))
+        yield page, errors
+    finally:
+        context.close()
 
 
 def canvas_is_drawn(png: bytes, *, min_std: float = 6.0, min_colours: int = 64) -> bool:

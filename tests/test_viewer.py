@@ -68,14 +68,6 @@ def exported(tmp_path_factory: pytest.TempPathFactory) -> tuple[bytes, dict[str,
     return (out / "saucer.glb").read_bytes(), json.loads((out / "scene.json").read_text(encoding="utf-8"))
 
 
-@pytest.fixture(scope="module")
-def chromium() -> None:
-    try:
-        browser._browser()
-    except browser.BrowserUnavailable as exc:
-        pytest.fail(f"{exc}", pytrace=False)
-
-
 def _page(name: str, fragment: str) -> Path:
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     path = ARTIFACTS / f"viewer-{name}.html"

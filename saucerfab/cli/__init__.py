@@ -33,6 +33,7 @@ SUBCOMMANDS: dict[str, str] = {
     "printers": "printers",
     "shapes": "shapes",
     "scene": "scene",
+    "studio": "studio",
 }
 
 

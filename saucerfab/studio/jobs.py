@@ -1,0 +1,295 @@
+"""The studio's job queue: designs and exports in worker processes, at most ``jobs`` at once.
+
+A scheduler thread in the server process (never its event loop) starts
+queued jobs in order as worker processes (``multiprocessing`` spawn
+context: a fresh interpreter, no state shared with the server; each one
+imports torch, about 2-3 s), and watches them:
+
+* cancel: the worker gets SIGINT (its ``run_design`` saves the checkpoint and
+  stops); one still alive after :data:`GRACE_S` seconds is killed;
+* a worker that dies without recording its end (killed, out of memory, a
+  crash in native code) leaves the run ``failed`` with a message that names
+  its ``worker.log``;
+* shutdown: no new job starts, every running worker gets SIGINT and is waited
+  for (so its checkpoint is saved: the run shows ``interrupted`` and resumes later).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from saucerfab.studio.workspace import NotFound, Workspace, now_iso
+
+#: seconds a worker has after SIGINT to save its checkpoint and stop, before it is killed
+GRACE_S = 20.0
+#: jobs run at once by default (a design already uses every core)
+DEFAULT_JOBS = 1
+#: how often the scheduler looks at its workers, seconds
+POLL_S = 0.1
+
+
+@dataclass(frozen=True)
+class Job:
+    """One unit of work: a run's design, or its export for one printer."""
+
+    kind: str  # "design" or "export"
+    run_id: str
+    printer: str | None = None
+
+
+@dataclass
+class _Running:
+    job: Job
+    process: Any  # multiprocessing.Process (spawn context)
+    stop_sent: float | None = None  # perf_counter of the SIGINT, when one was sent
+    killed: bool = False
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class JobQueue:
+    """Queued jobs and their worker processes (see the module docstring).
+
+    Args:
+        ws: the workspace.
+        jobs: how many workers run at once (a design uses every core: 1 is usual).
+        grace_s: seconds between SIGINT and kill.
+    """
+
+    def __init__(self, ws: Workspace, *, jobs: int = DEFAULT_JOBS, grace_s: float = GRACE_S) -> None:
+        if jobs < 1:
+            raise ValueError(f"jobs must be at least 1, got {jobs}")
+        self.ws = ws
+        self.jobs = jobs
+        self.grace_s = grace_s
+        self._pending: deque[Job] = deque()
+        self._running: dict[Job, _Running] = {}
+        self._stop_asked: set[str] = set()  # run ids whose design worker is to get SIGINT
+        self._cond = threading.Condition()
+        self._accepting = True
+        self._quit = False
+        self._thread: threading.Thread | None = None
+        self._ctx = multiprocessing.get_context("spawn")
+
+    # ------------------------------------------------------------------ the API's side
+
+    def start(self) -> None:
+        """Start the scheduler thread."""
+        self._thread = threading.Thread(target=self._loop, name="studio-jobs", daemon=True)
+        self._thread.start()
+
+    def submit(self, job: Job) -> None:
+        """Queue ``job`` (after those already queued).
+
+        Raises:
+            RuntimeError: the queue is shutting down.
+        """
+        with self._cond:
+            if not self._accepting:
+                raise RuntimeError("the studio is shutting down; no new jobs are started")
+            # a job whose previous worker is still ending (a resume right after a cancel) is queued too:
+            # the scheduler starts it once that worker is gone
+            if job not in self._pending:
+                self._pending.append(job)
+            self._cond.notify_all()
+
+    def discard(self, job: Job) -> bool:
+        """Take a queued ``job`` off the queue; False when it is not queued (started, or unknown)."""
+        with self._cond:
+            try:
+                self._pending.remove(job)
+            except ValueError:
+                return False
+            return True
+
+    def stop(self, run_id: str) -> None:
+        """Send the design worker of ``run_id`` SIGINT (now, or as soon as it has started); kill it after the grace."""
+        with self._cond:
+            self._stop_asked.add(run_id)
+            self._cond.notify_all()
+
+    def running(self) -> dict[str, int | None]:
+        """Run id -> worker pid of the design jobs running now."""
+        with self._cond:
+            return {j.run_id: r.process.pid for j, r in self._running.items() if j.kind == "design"}
+
+    def queued(self) -> list[Job]:
+        """The jobs waiting, in order."""
+        with self._cond:
+            return list(self._pending)
+
+    def shutdown(self, timeout_s: float | None = None) -> None:
+        """Stop accepting jobs; SIGINT every running worker and wait for them (killed after the grace)."""
+        with self._cond:
+            self._accepting = False
+            self._pending.clear()  # they stay "queued" in their records and are queued again at the next start
+            for job, r in self._running.items():
+                self._signal(r)
+            self._cond.notify_all()
+        deadline = time.perf_counter() + (self.grace_s if timeout_s is None else timeout_s) + 5
+        while time.perf_counter() < deadline:
+            with self._cond:
+                if not self._running or self._thread is None or not self._thread.is_alive():
+                    break
+            time.sleep(POLL_S)
+        with self._cond:
+            self._quit = True
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        for r in list(self._running.values()):  # the scheduler is gone (or stuck): end them here
+            r.process.kill()
+            r.process.join(timeout=5)
+            self._reap(r)
+        self._running.clear()
+
+    def abandon(self) -> None:
+        """Stop the scheduler at once and forget the workers, touching no record (what a crash of the server does).
+
+        For tests of a restart: the workers are left running (their parent
+        watch does not fire, since this process lives on); kill them yourself.
+        """
+        with self._cond:
+            self._accepting = False
+            self._quit = True
+            self._pending.clear()
+            self._running.clear()
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+
+    # ------------------------------------------------------------------ the scheduler thread
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                if self._quit:
+                    return
+                for r in list(self._running.values()):
+                    if r.job.kind == "design" and r.job.run_id in self._stop_asked and r.stop_sent is None:
+                        self._signal(r)
+                    if r.stop_sent is not None and not r.killed and time.perf_counter() - r.stop_sent > self.grace_s:
+                        print(f"studio: worker of {r.job.run_id} did not stop within {self.grace_s:g} s; killed",
+                              file=sys.stderr)
+                        r.process.kill()
+                        r.killed = True
+                ended = [r for r in self._running.values() if not r.process.is_alive()]
+                for r in ended:
+                    del self._running[r.job]
+                    self._stop_asked.discard(r.job.run_id)
+                start: list[Job] = []
+                for job in list(self._pending):
+                    if not self._accepting or len(self._running) + len(start) >= self.jobs:
+                        break
+                    if job not in self._running:  # else wait until its earlier worker has ended
+                        self._pending.remove(job)
+                        start.append(job)
+            for r in ended:
+                r.process.join(timeout=1)
+                self._reap(r)
+            for job in start:
+                self._launch(job)
+            with self._cond:
+                if not ended and not start:
+                    self._cond.wait(POLL_S)
+
+    def _signal(self, r: _Running) -> None:
+        """SIGINT to a worker (once); the caller holds the condition."""
+        if r.stop_sent is None and r.process.pid is not None:
+            r.stop_sent = time.perf_counter()
+            try:
+                os.kill(r.process.pid, signal.SIGINT)
+            except ProcessLookupError:
+                pass
+
+    def _launch(self, job: Job) -> None:
+        """Mark the job running (if it is still queued) and start its worker."""
+        from saucerfab.studio import worker
+
+        ok = [False]
+
+        def mark(rec: dict[str, Any]) -> None:
+            if job.kind == "design":
+                if rec.get("status") != "queued":
+                    return  # cancelled or deleted while it waited
+                rec.update(status="running", started=now_iso(), finished=None, error=None)
+            else:
+                e = rec.get("exports", {}).get(job.printer or "")
+                if not e or e.get("status") != "queued":
+                    return
+                e.update(status="running", started=now_iso(), error=None)
+            ok[0] = True
+
+        try:
+            self.ws.update_run(job.run_id, mark)
+        except NotFound:
+            return
+        if not ok[0]:
+            return
+        if job.kind == "design":  # a resumed run starts its progress afresh
+            (self.ws.runs / job.run_id / "progress.json").unlink(missing_ok=True)
+        proc = self._ctx.Process(target=worker.main, args=(str(self.ws.root), job.kind, job.run_id, job.printer),
+                                 name=f"saucerfab-studio-{job.kind}-{job.run_id}")
+        try:
+            proc.start()
+        except OSError as exc:  # no memory or process slots left: the run says so and can be resumed
+            self._fail(job, f"could not start a worker process: {exc}; resume it later")
+            return
+        with self._cond:
+            if self._quit:  # abandoned while it started
+                return
+            r = _Running(job, proc)
+            self._running[job] = r
+            if not self._accepting or (job.kind == "design" and job.run_id in self._stop_asked):
+                self._signal(r)
+
+    def _reap(self, r: _Running) -> None:
+        """A worker has ended: when it did not record its end, record it (cancelled, interrupted or failed)."""
+        job, code = r.job, r.process.exitcode
+        log = f"runs/{job.run_id}/worker.log"
+        why = f"killed by signal {-code}" if code is not None and code < 0 else f"exit code {code}"
+
+        def change(rec: dict[str, Any]) -> None:
+            if job.kind == "design":
+                status = rec.get("status")
+                if status not in ("running", "cancelling"):
+                    return  # the worker recorded its end
+                if status == "cancelling":
+                    rec.update(status="cancelled", error="cancelled (the worker was stopped); resume continues "
+                               "after the last stage that had finished", finished=now_iso())
+                elif not self._accepting:
+                    rec.update(status="interrupted", error="the studio stopped while this design was running; "
+                               "resume continues after the last stage that had finished", finished=now_iso())
+                else:
+                    rec.update(status="failed", finished=now_iso(),
+                               error=f"the design worker stopped unexpectedly ({why}); what it said is in {log}. "
+                               "Resume continues after the last stage that had finished")
+            else:
+                e = rec.get("exports", {}).get(job.printer or "")
+                if e and e.get("status") in ("queued", "running"):
+                    e.update(status="failed", error=f"the export worker stopped unexpectedly ({why}); what it "
+                             f"said is in {log}. Start the export again")
+
+        try:
+            self.ws.update_run(job.run_id, change)
+        except NotFound:
+            pass
+
+    def _fail(self, job: Job, message: str) -> None:
+        def change(rec: dict[str, Any]) -> None:
+            if job.kind == "design":
+                rec.update(status="failed", error=message, finished=now_iso())
+            else:
+                rec.get("exports", {}).get(job.printer or "", {}).update(status="failed", error=message)
+
+        try:
+            self.ws.update_run(job.run_id, change)
+        except NotFound:
+            pass

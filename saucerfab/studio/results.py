@@ -1,0 +1,162 @@
+"""What the API shows of a run's files: results of a finished design, an export's findings, the 3D viewer page.
+
+Read-only views of the run folder (``design/``, ``exports/<printer>/``); every
+URL points at the API's file route (``/api/runs/{id}/files/{path}``), which
+serves only what :data:`SERVED_SUFFIXES` lists, from inside the run folder.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from saucerfab.fileio import write_text_atomic
+
+#: the suffixes the file route serves, and their media types
+SERVED_SUFFIXES = {
+    ".png": "image/png", ".json": "application/json", ".html": "text/html; charset=utf-8",
+    ".zip": "application/zip", ".3mf": "model/3mf", ".obj": "text/plain; charset=utf-8",
+    ".glb": "model/gltf-binary", ".ply": "application/octet-stream", ".stl": "model/stl",
+    ".wrl": "model/vrml", ".mtl": "text/plain; charset=utf-8",
+}
+#: the design's pictures the results show: API name -> preview file
+RESULT_IMAGES = {
+    "composite": "composite.png", "direct": "direct_view.png", "reflected": "reflected_view.png",
+    "reflected2": "reflected2_view.png", "height_change": "height_change.png",
+}
+#: the viewer page's cache in the run folder
+VIEWER_NAME = "viewer.html"
+#: the largest JSON file read for the results, bytes
+_MAX_JSON = 8 << 20
+
+
+def _json(path: Path) -> dict[str, Any] | None:
+    try:
+        if path.stat().st_size > _MAX_JSON:
+            return None
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return None
+    return d if isinstance(d, dict) else None
+
+
+def file_url(run_id: str, rel: str) -> str:
+    """The API URL of file ``rel`` (posix, relative to the run folder)."""
+    return f"/api/runs/{run_id}/files/{rel}"
+
+
+def verify_rows(run_id: str, folder: Path, rel: str) -> list[dict[str, Any]]:
+    """The views of ``folder/verify/verify.json`` (``rel``: that folder relative to the run) with picture URLs."""
+    ver = _json(folder / "verify" / "verify.json")
+    rows = []
+    for f in (ver or {}).get("files", [])[:1]:
+        for v in f.get("views", []) if isinstance(f, dict) else []:
+            if not isinstance(v, dict):
+                continue
+            pic = v.get("picture")
+            ok = isinstance(pic, str) and "/" not in pic and "\\" not in pic and (folder / "verify" / pic).is_file()
+            rows.append({"view": v.get("view"), "eye": v.get("eye"), "psnr_db": v.get("psnr_db"),
+                         "coverage": v.get("coverage"), "passed": v.get("passed"),
+                         "picture_url": file_url(run_id, f"{rel}/verify/{pic}") if ok else None})
+    return rows
+
+
+def design_results(run_id: str, run_dir: Path) -> dict[str, Any] | None:
+    """``results`` of a finished design: pictures, metrics, verify rows, report and viewer URLs (None if not done)."""
+    design = run_dir / "design"
+    meta = _json(design / "design.json")
+    if meta is None:
+        return None
+    images = {k: file_url(run_id, f"design/previews/{name}") for k, name in RESULT_IMAGES.items()
+              if (design / "previews" / name).is_file()}
+    m = meta.get("metrics", {}) if isinstance(meta.get("metrics"), dict) else {}
+    metrics = {k: m.get(k) for k in ("E_visual_final", "max_abs_height_change", "total_s") if k in m}
+    metrics["stages"] = [{k: st.get(k) for k in ("name", "iterations", "E_visual", "E_deform", "stop_reason")}
+                         for st in m.get("stages", []) if isinstance(st, dict)]
+    enh = meta.get("parameters", {}).get("enhancement_used") if isinstance(meta.get("parameters"), dict) else None
+    return {
+        "images": images,
+        "metrics": metrics,
+        "enhancement": enh,
+        "verify": verify_rows(run_id, design, "design"),
+        "report_url": file_url(run_id, "design/report.html"),
+        "viewer_url": f"/api/runs/{run_id}/viewer",
+    }
+
+
+def thumb_url(run_id: str, run_dir: Path, rec: dict[str, Any]) -> str | None:
+    """The run's picture in the history: its composite when done, else its latest look, else its direct picture."""
+    if (run_dir / "design" / "previews" / "composite.png").is_file():
+        return file_url(run_id, "design/previews/composite.png")
+    looks = sorted((run_dir / "looks").glob("*_composite.png"), key=lambda p: p.stat().st_mtime) \
+        if (run_dir / "looks").is_dir() else []
+    if looks:
+        return file_url(run_id, f"looks/{looks[-1].name}")
+    direct = rec.get("options", {}).get("direct")
+    return f"/api/uploads/{direct}/thumb.png" if isinstance(direct, str) else None
+
+
+def checks_summary(print_folder: Path) -> list[dict[str, Any]]:
+    """check.json of a print folder, per file: {file, verdict, printable, findings [{code, severity, message}]}."""
+    doc = _json(print_folder / "check.json")
+    out = []
+    for rep in (doc or {}).get("files", []):
+        if isinstance(rep, dict):
+            out.append({
+                "file": str(rep.get("path", "")), "verdict": rep.get("verdict"),
+                "printable": rep.get("verdict") == "printable",
+                "findings": [{k: f.get(k) for k in ("code", "severity", "message")}
+                             for f in rep.get("findings", []) if isinstance(f, dict)],
+            })
+    return out
+
+
+def export_details(run_id: str, run_dir: Path, printer: str, entry: dict[str, Any]) -> dict[str, Any]:
+    """An export's record with its check findings, verify rows and URLs (what GET .../exports/{printer} answers)."""
+    out = dict(entry, printer=printer)
+    folder = run_dir / "exports" / printer
+    if entry.get("status") == "done" and folder.is_dir():
+        rel = f"exports/{printer}"
+        out["check"] = checks_summary(folder)
+        out["verify"] = verify_rows(run_id, folder, rel)
+        out["report_url"] = file_url(run_id, f"{rel}/report.html")
+        out["zip_url"] = f"/api/runs/{run_id}/exports/{printer}.zip"
+        out["file_urls"] = {f: file_url(run_id, f"{rel}/{f}") for f in entry.get("files", [])
+                            if Path(f).suffix.lower() in SERVED_SUFFIXES}
+    return out
+
+
+def viewer_page(run_dir: Path) -> Path:
+    """The run's 3D viewer page (cached as ``viewer.html``, made again when the design is newer); returns its path.
+
+    A bare page for the studio's iframe: only the design report's own view
+    (:func:`saucerfab.report_page.design_viewer_section`: the designed saucer
+    top with its mirror cup, three.js inline, no network), 480 px tall, no
+    margins, no headings.
+    """
+    import html
+
+    from saucerfab.design import load_design
+    from saucerfab.report_page import design_viewer_section
+
+    design_dir = run_dir / "design"
+    page = run_dir / VIEWER_NAME
+    stamp = (design_dir / "design.json").stat().st_mtime
+    if page.is_file() and page.stat().st_mtime >= stamp:
+        return page
+    design = load_design(design_dir)
+    names = " / ".join(str(design.inputs[k].get("file")) for k in ("direct", "reflected", "reflected2")
+                       if isinstance(design.inputs.get(k), dict))
+    body = design_viewer_section(design).html or ""
+    write_text_atomic(page, (
+        '<!doctype html>\n<html lang="en"><head><meta charset="utf-8">'
+        f"<title>saucerfab studio 3D: {html.escape(names)}</title>"
+        "<style>body{margin:0;background:#f0f1f3}.saucer-viewer{margin:0!important}"
+        ".saucer-viewer>p{padding:0 .6em .4em}</style></head>\n<body>\n" + body + "\n</body></html>\n"))
+    return page
+    design = load_design(design_dir)
+    names = " / ".join(str(design.inputs[k].get("file")) for k in ("direct", "reflected", "reflected2")
+                       if isinstance(design.inputs.get(k), dict))
+    write_text_atomic(page, html_report([design_viewer_section(design)], title=f"saucerfab studio 3D: {names}"))
+    return page

@@ -1,0 +1,324 @@
+"""The studio's page in a real, headless Chromium against the real server.
+
+``python -m saucerfab studio`` is started in a subprocess on a fresh
+workspace and a free port; Debian's Chromium (through Playwright, see
+``tests/browser.py``) loads the page, is refused a bad upload with the
+server's own message, uploads the bundled sample pictures, runs a tiny
+design (16 x 16 heightfield, 48 px views, 6 iterations a stage) while the
+progress and the first look show, checks the results, the 3D viewer
+(``window.saucerViewerReady`` and a drawn canvas in its iframe), exports
+for the J55 as 3MF, sees the printability findings and verify rows, and
+downloads the print zip. Then it duplicates the design with a change
+(the form is loaded with its options), cancels the copy, resumes it,
+cancels it again and deletes it, reopens the first design from the history
+and clears the form for a new one. The page must log no console error on
+the way (apart from the one 400 the bad upload is answered with).
+
+Screenshots go to ``out/test-artifacts/studio/`` for a developer to look
+at. Chromium comes from ``.ci/install-tools``; a missing browser fails the
+test (it must not be skipped in CI).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+import zipfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import browser
+
+ROOT = Path(__file__).resolve().parents[2]
+SAMPLES = ROOT / "samples"
+ARTIFACTS = ROOT / "out" / "test-artifacts" / "studio"
+STARTUP_S = 60
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _get(url: str, timeout: float = 5) -> tuple[int, bytes]:
+    try:
+        with urllib.request.urlopen(url, timeout=timeout) as r:
+            return r.status, r.read()
+    except urllib.error.HTTPError as exc:
+        return exc.code, exc.read()
+
+
+def _post(url: str, data: bytes) -> tuple[int, dict[str, Any]]:
+    req = urllib.request.Request(url, data=data, method="POST", headers={"Content-Type": "application/octet-stream"})
+    try:
+        with urllib.request.urlopen(req, timeout=30) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code, json.loads(exc.read())
+
+
+def start_studio(workspace: Path, port: int, log: Path) -> subprocess.Popen[bytes]:
+    """``saucerfab studio`` in a subprocess, once it answers ``GET /api/options``."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    with log.open("wb") as out:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "saucerfab", "studio", "--workspace", str(workspace), "--port", str(port)],
+            cwd=ROOT,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,
+        )
+    deadline = time.monotonic() + STARTUP_S
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise AssertionError(f"saucerfab studio exited with {proc.returncode}:\n{_tail(log)}")
+        try:
+            if _get(f"http://127.0.0.1:{port}/api/options", timeout=2)[0] == 200:
+                return proc
+        except OSError:
+            pass
+        time.sleep(0.2)
+    stop_studio(proc)
+    raise AssertionError(f"saucerfab studio did not answer in {STARTUP_S} s:\n{_tail(log)}")
+
+
+def _tail(log: Path) -> str:
+    return log.read_text(errors="replace")[-3000:]
+
+
+def stop_studio(proc: subprocess.Popen[bytes]) -> None:
+    """Ctrl-C the server (it stops its workers), then make sure."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=5)
+
+
+@pytest.fixture(scope="module")
+def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    tmp = tmp_path_factory.mktemp("studio")
+    port = _free_port()
+    log = tmp / "server.log"
+    proc = start_studio(tmp / "ws", port, log)
+    try:
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        stop_studio(proc)
+        ARTIFACTS.mkdir(parents=True, exist_ok=True)
+        (ARTIFACTS / "server.log").write_text(log.read_text(errors="replace"), encoding="utf-8")
+
+
+def _shot(page: Any, name: str) -> None:
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.evaluate("() => window.scrollTo(0, 0)")  # the inputs column is sticky: shoot from the top
+    page.screenshot(path=str(ARTIFACTS / f"{name}.png"), full_page=True)
+
+
+def _images_loaded(page: Any, selector: str) -> int:
+    """How many images matching ``selector`` have decoded pixels."""
+    js = f"() => [...document.querySelectorAll({selector!r})].filter(i => i.complete && i.naturalWidth > 0).length"
+    return int(page.evaluate(js))
+
+
+def _shown_run(page: Any) -> str:
+    """The id of the design the page shows (it keeps it in the address: ``#run=ID``)."""
+    return str(page.evaluate("() => location.hash.slice('#run='.length)"))
+
+
+def _wait(page: Any, what: str, check: Any, timeout_s: float, errors: list[str]) -> Any:
+    """Poll ``check()`` until truthy; fail early on a page error, with what was awaited."""
+    t0 = time.monotonic()
+    while True:
+        value = check()
+        if value:
+            return value
+        hard = [e for e in errors if not _allowed(e)]
+        assert not hard, f"page errors while waiting for {what}: {hard}"
+        assert time.monotonic() - t0 < timeout_s, f"timed out after {timeout_s} s waiting for {what}"
+        page.wait_for_timeout(100)
+
+
+#: the browser logs a 4xx answer to fetch() as a console error: the bad upload's 400 is expected
+_EXPECTED_400 = re.compile(r"Failed to load resource: the server responded with a status of 400")
+
+
+def _allowed(error: str) -> bool:
+    """Aborted requests are the page's own doing, not faults: the event stream it closes once a
+    design is done, an <img> whose src it replaced before the picture came."""
+    return "net::ERR_ABORTED" in error and error.startswith("request failed")
+
+
+def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, tmp_path: Path) -> None:
+    t_start = time.monotonic()
+    with browser.live_page((1280, 900), accept_downloads=True) as (page, errors):
+        page.goto(studio + "/", wait_until="load")
+        page.wait_for_selector("body[data-ready='true']", timeout=20_000)
+        assert page.locator("#printer option").count() >= 1
+        unlabelled = page.evaluate(
+            "() => [...document.querySelectorAll('input, select, textarea')]"
+            ".filter(e => !e.labels.length).map(e => e.id)"
+        )
+        assert not unlabelled, f"controls without a label: {unlabelled}"
+        _shot(page, "01-empty")
+
+        # ---- a text file called .png: the server's message in the page, no traceback ----
+        bad = tmp_path / "notes.png"
+        bad.write_text("these are my notes, not a picture\n", encoding="utf-8")
+        status, body = _post(f"{studio}/api/uploads?role=direct&name=notes.png", bad.read_bytes())
+        assert status == 400 and body.get("error"), (status, body)
+        n_before = len(errors)
+        page.set_input_files("#file-direct", str(bad))
+        box = page.locator("#form-error")
+        box.wait_for(state="visible", timeout=10_000)
+        shown = box.inner_text()
+        assert body["error"] in shown, (shown, body["error"])
+        assert "Traceback" not in page.content() and 'File "' not in shown
+        expected = errors[n_before:]
+        assert all(_EXPECTED_400.search(e) for e in expected), expected
+        del errors[n_before:]
+
+        # ---- the two pictures, fitted into their frames at once ----
+        page.set_input_files("#file-direct", str(SAMPLES / "direct_heart.png"))
+        page.set_input_files("#file-reflected", str(SAMPLES / "reflected_star.png"))
+        _wait(page, "both fitted previews", lambda: _images_loaded(page, ".dropzone .frame img") == 2, 20, errors)
+        _wait(page, "the large previews", lambda: _images_loaded(page, "#fitted-pair img") == 2, 20, errors)
+        assert page.locator("#form-error").is_hidden()
+        assert "fitted.png" in page.locator(".dropzone[data-role='direct'] .frame img").get_attribute("src")
+        assert page.locator("#fit-rule").inner_text().strip(), "the framing rule is shown"
+
+        # ---- a tiny design ----
+        page.locator("#advanced summary").click()
+        page.fill("#resolution", "16")
+        page.fill("#image-size", "48")
+        page.fill("#max-iters", "6")
+        page.select_option("#printer", "j55")
+        _shot(page, "02-pictures")
+        page.click("#start")
+        page.locator("#run").wait_for(state="visible", timeout=20_000)
+
+        seen = {"stage": False, "look": False}
+
+        def progress_then_done() -> bool:
+            status = page.locator("#run-status").inner_text()
+            if status in ("failed", "cancelled", "interrupted"):
+                raise AssertionError(f"the design ended {status}: {page.locator('#run-error').inner_text()}")
+            if not seen["stage"] and re.search(r"Stage \d+ of \d+", page.locator("#progress-stage").inner_text()):
+                seen["stage"] = True
+            looks = page.locator("#looks").is_visible() and _images_loaded(page, "#looks-gallery img") >= 3
+            if not seen["look"] and looks:
+                seen["look"] = True
+                _shot(page, "03-running")
+            return status == "done"
+
+        _wait(page, "the design to finish", progress_then_done, 75, errors)
+        assert seen["look"], "no preview (first look) appeared while the design ran"
+        assert seen["stage"], "no stage progress appeared while the design ran"
+
+        # ---- results: the views, the height change, verify, the 3D print ----
+        page.locator("#results").wait_for(state="visible", timeout=10_000)
+        _wait(page, "the result images", lambda: _images_loaded(page, "#results-gallery img") >= 4, 20, errors)
+        keys = page.evaluate("() => [...document.querySelectorAll('#results-gallery figure')].map(f => f.dataset.key)")
+        assert {"composite", "direct", "reflected", "height_change"} <= set(keys), keys
+        assert page.locator("#verify table tr").count() >= 2
+        viewer = page.frame_locator("#viewer")
+        page.locator("#viewer").scroll_into_view_if_needed()
+
+        def viewer_frame() -> Any:
+            for f in page.frames:
+                if f.url.endswith("/viewer") and f.evaluate("() => window.saucerViewerReady === true"):
+                    return f
+            return None
+
+        _wait(page, "the 3D viewer", viewer_frame, 45, errors)
+        canvas = viewer.locator("canvas").first.screenshot()
+        assert browser.canvas_is_drawn(canvas), "the 3D viewer's canvas is blank"
+        history = page.locator("#history li")
+        _wait(page, "the design done in the history", lambda: "done" in " ".join(history.all_inner_texts()), 10, errors)
+        assert history.count() == 1
+        _shot(page, "04-done")
+
+        # ---- export for the J55 as 3MF: findings, verify rows, the zip ----
+        page.select_option("#export-printer", "j55")
+        page.check("#export-formats input[value='3mf']")
+        page.click("#export-start")
+        link = page.locator("a[data-download='j55']")
+        card = page.locator(".export-card[data-printer='j55']")
+
+        def export_done() -> bool:
+            if "failed" in card.locator(".badge").all_inner_texts():
+                raise AssertionError(f"the export failed: {card.inner_text()}")
+            return link.count() == 1
+
+        _wait(page, "the export", export_done, 75, errors)
+        assert card.locator(".findings li").count() >= 1, card.inner_text()
+        assert "printable" in card.inner_text()
+        assert card.locator("table.verify tr").count() >= 2, card.inner_text()
+        _shot(page, "05-export")
+        with page.expect_download(timeout=20_000) as info:
+            link.click()
+        zpath = tmp_path / "print.zip"
+        info.value.save_as(zpath)
+        with zipfile.ZipFile(zpath) as z:
+            names = z.namelist()
+        assert any(n.endswith(".3mf") for n in names), names
+
+        # ---- duplicate with changes, cancel, resume, delete ----
+        first_id = _shown_run(page)
+        first_title = page.locator("#run-title").inner_text()
+        page.click("#run-duplicate")
+        assert page.locator("#duplicate-note").is_visible()
+        assert page.input_value("#resolution") == "16" and page.input_value("#shape") == "waves"
+        page.select_option("#shape", "bowl")
+        page.fill("#max-iters", "150")  # long enough to be caught running
+        page.click("#start")
+        _wait(page, "the copy", lambda: _shown_run(page) != first_id, 20, errors)
+        copy_id = _shown_run(page)
+        status, body = _get(f"{studio}/api/runs/{copy_id}")
+        record = json.loads(body)
+        assert record["options"]["shape"] == "bowl" and record["options"]["resolution"] == 16, record["options"]
+        _wait(page, "the copy in the history", lambda: page.locator("#history li").count() == 2, 10, errors)
+
+        def status_is(*wanted: str) -> bool:
+            return page.locator("#run-status").inner_text() in wanted
+
+        page.click("#run-cancel")
+        _wait(page, "the copy to be cancelled", lambda: status_is("cancelled"), 30, errors)
+        assert page.locator("#run-resume").is_visible()
+        page.click("#run-resume")
+        _wait(page, "the copy to be queued again", lambda: status_is("queued", "running"), 20, errors)
+        page.click("#run-cancel")
+        _wait(page, "the copy to be cancelled again", lambda: status_is("cancelled"), 30, errors)
+        page.once("dialog", lambda dialog: dialog.accept())
+        page.click("#run-delete")
+        _wait(page, "the copy to be deleted", lambda: page.locator("#history li").count() == 1, 20, errors)
+        assert page.locator("#run").is_hidden()
+        assert _get(f"{studio}/api/runs/{copy_id}")[0] == 404
+
+        # ---- reopen the first design from the history; then a new, empty design ----
+        page.click("#history li button")
+        reopened = lambda: status_is("done") and page.locator("#results").is_visible()  # noqa: E731
+        _wait(page, "the reopened design", reopened, 20, errors)
+        assert page.locator("#run-title").inner_text() == first_title
+        page.click("#new-design")
+        assert page.locator("#welcome").is_visible() and page.locator("#run").is_hidden()
+        assert page.locator(".dropzone.filled").count() == 0
+
+        hard = [e for e in errors if not _allowed(e)]
+        assert not hard, hard
+    assert time.monotonic() - t_start < 150

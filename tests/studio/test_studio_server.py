@@ -1,0 +1,61 @@
+"""``saucerfab studio``: the subcommand, one server per workspace, the loopback warning's test."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from saucerfab.cli import main
+from saucerfab.fileio import exclusive_lock
+from saucerfab.studio.server import is_loopback, url_of
+from saucerfab.studio.workspace import Workspace
+
+
+def test_help_lists_the_options(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["studio", "--help"])
+    assert info.value.code == 0
+    out = capsys.readouterr().out
+    for opt in ("--port", "--host", "--workspace", "--open", "--jobs", "--max-upload-mb", "no authentication"):
+        assert opt in out
+
+
+def test_a_second_server_on_one_workspace_stops_at_once(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    ws = Workspace(tmp_path / "ws")
+    with exclusive_lock(ws.root / ".lock", lambda: RuntimeError("held")):
+        assert main(["studio", "--workspace", str(ws.root), "--port", "0"]) == 2
+    assert "already serving" in capsys.readouterr().err
+
+
+def test_bad_workspace_and_numbers(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "notes.txt").write_text("mine")
+    assert main(["studio", "--workspace", str(tmp_path)]) == 2
+    assert "other files" in capsys.readouterr().err
+    assert main(["studio", "--workspace", str(tmp_path / "w"), "--jobs", "0"]) == 2
+    assert "--jobs" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("host, loop", [("127.0.0.1", True), ("::1", True), ("localhost", True),
+                                        ("0.0.0.0", False), ("192.168.1.4", False), ("studio.lan", False)])
+def test_loopback(host: str, loop: bool) -> None:
+    assert is_loopback(host) is loop
+
+
+def test_url_of() -> None:
+    assert url_of("0.0.0.0", 8000) == "http://127.0.0.1:8000/"
+    assert url_of("::1", 80) == "http://[::1]:80/"
+
+
+def test_banner_and_the_network_warning(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    import uvicorn
+
+    served = []
+    monkeypatch.setattr(uvicorn.Server, "run", lambda self: served.append(self.config.host))  # no real serving
+    main(["studio", "--workspace", str(tmp_path / "ws"), "--host", "0.0.0.0", "--port", "0"])
+    out, err = capsys.readouterr()
+    assert served == ["0.0.0.0"] and str(tmp_path / "ws") in out and "http://" in out
+    assert "anyone on the network" in err and "no authentication" in err
+    main(["studio", "--workspace", str(tmp_path / "ws"), "--port", "0"])
+    assert "warning" not in capsys.readouterr().err
