@@ -18,7 +18,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Sequence
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
@@ -27,6 +27,7 @@ import anyio
 from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
+from starlette.middleware import Middleware
 from starlette.requests import ClientDisconnect, Request
 from starlette.responses import FileResponse, JSONResponse, Response, StreamingResponse
 from starlette.routing import Mount, Route
@@ -34,6 +35,7 @@ from starlette.staticfiles import StaticFiles
 
 from saucerfab.errors import SaucerfabError
 from saucerfab.studio import options as opts
+from saucerfab.studio.guard import LOOPBACK_NAMES, HostOriginGuard
 from saucerfab.studio.jobs import DEFAULT_JOBS, Job, JobQueue
 from saucerfab.studio.results import SERVED_SUFFIXES, design_results, export_details, thumb_url, viewer_page
 from saucerfab.studio.workspace import (
@@ -105,6 +107,7 @@ def create_app(
     max_upload_bytes: int = MAX_UPLOAD_BYTES,
     max_pixels: int | None = None,
     grace_s: float | None = None,
+    allowed_hosts: Sequence[str] | None = LOOPBACK_NAMES,
 ) -> Starlette:
     """The studio app over ``workspace`` (made a workspace if new or empty).
 
@@ -115,6 +118,10 @@ def create_app(
         max_pixels: the largest picture accepted, width x height
             (default: :data:`saucerfab.images.DEFAULT_MAX_PIXELS`).
         grace_s: seconds a cancelled worker has to stop before it is killed.
+        allowed_hosts: the names accepted in a request's ``Host`` (loopback by
+            default; None: any, for a studio shared on the network); requests
+            from another site's page are refused either way
+            (:mod:`saucerfab.studio.guard`).
     """
     from saucerfab.images import DEFAULT_MAX_PIXELS
 
@@ -438,6 +445,7 @@ def create_app(
     ]
     app = Starlette(
         routes=routes,
+        middleware=[Middleware(HostOriginGuard, allowed_hosts=allowed_hosts)],
         lifespan=lifespan,
         exception_handlers={StudioError: studio_error, SaucerfabError: studio_error, HTTPException: http_error,
                             ClientDisconnect: client_gone, Exception: server_error},

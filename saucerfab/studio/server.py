@@ -78,6 +78,7 @@ def serve(
     import uvicorn
 
     from saucerfab.studio.app import create_app
+    from saucerfab.studio.guard import LOOPBACK_NAMES
 
     if not 0 <= port <= 65535:
         raise ConfigError(f"--port must be 0 to 65535, got {port}")
@@ -92,7 +93,8 @@ def serve(
     )
     with exclusive_lock(ws.root / ".lock", busy):
         _check_port(host, port)
-        app = create_app(ws.root, jobs=jobs, max_upload_bytes=max_upload_bytes)
+        app = create_app(ws.root, jobs=jobs, max_upload_bytes=max_upload_bytes,
+                         allowed_hosts=LOOPBACK_NAMES if is_loopback(host) else None)
         url = url_of(host, port)
         print(f"saucerfab studio: {url}  (workspace {ws.root}; Ctrl-C stops it, running designs are kept "
               "and resume later)", flush=True)

@@ -35,6 +35,9 @@ from starlette.testclient import TestClient
 
 from saucerfab.studio.app import STATIC, create_app
 
+#: the studio answers to loopback names only (saucerfab/studio/guard.py); the test client's default is 'testserver'
+LOCAL = "http://127.0.0.1:8000"
+
 
 @pytest.fixture
 def app(tmp_path: Path):  # type: ignore[no-untyped-def]
@@ -44,7 +47,7 @@ def app(tmp_path: Path):  # type: ignore[no-untyped-def]
 @pytest.fixture
 def idle(app) -> TestClient:  # type: ignore[no-untyped-def]
     """A client with no job queue running (no lifespan): runs stay queued."""
-    return TestClient(app)
+    return TestClient(app, base_url=LOCAL)
 
 
 # --------------------------------------------------------------------------- no workers
@@ -68,7 +71,7 @@ def test_page_options_and_unknown_routes(idle: TestClient) -> None:
 
 
 def test_bad_uploads_are_4xx_with_a_message(tmp_path: Path) -> None:
-    client = TestClient(create_app(tmp_path / "ws", max_upload_bytes=100_000))
+    client = TestClient(create_app(tmp_path / "ws", max_upload_bytes=100_000), base_url=LOCAL)
     cases = [
         ("direct", b"plain text, not a picture", 400, "not a PNG, JPEG or WebP"),
         ("direct", bomb_png(), 400, "64,000,000 pixels"),
@@ -220,7 +223,7 @@ def test_event_stream_of_a_run_deleted_meanwhile(idle: TestClient) -> None:
 
 def test_internal_error_is_a_500_without_traceback(tmp_path: Path) -> None:
     app = create_app(tmp_path / "ws")
-    client = TestClient(app, raise_server_exceptions=False)
+    client = TestClient(app, base_url=LOCAL, raise_server_exceptions=False)
     app.state.workspace.list_runs = lambda: 1 / 0  # a fault of the server itself
     r = client.get("/api/runs")
     assert r.status_code == 500 and r.json()["error"].startswith("internal error")
@@ -232,7 +235,7 @@ def test_internal_error_is_a_500_without_traceback(tmp_path: Path) -> None:
 
 def test_design_verify_export_download(app) -> None:  # type: ignore[no-untyped-def]
     """Start -> events -> done with results, the 3D viewer, an export with its findings, the zip."""
-    with TestClient(app) as client:
+    with TestClient(app, base_url=LOCAL) as client:
         run = client.post("/api/runs", json={**pair(client), **TINY, "verify": True}).json()
         rid = run["id"]
         with client.stream("GET", f"/api/runs/{rid}/events") as s:
@@ -285,7 +288,7 @@ def _wait_export(client: TestClient, rid: str, printer: str, timeout_s: float = 
 
 
 def test_cancel_then_resume_from_the_checkpoint(app) -> None:  # type: ignore[no-untyped-def]
-    with TestClient(app) as client:
+    with TestClient(app, base_url=LOCAL) as client:
         rid = client.post("/api/runs", json={**pair(client), **LONG}).json()["id"]
         wait_in_stage(client, rid)
         r = client.post(f"/api/runs/{rid}/cancel")
@@ -305,8 +308,8 @@ def test_cancel_then_resume_from_the_checkpoint(app) -> None:  # type: ignore[no
 def test_two_tabs_at_once(tmp_path: Path) -> None:
     """Two clients upload and start designs at the same time (two workers at once): two intact design folders."""
     app = create_app(tmp_path / "ws", jobs=2)
-    with TestClient(app) as tab1:
-        tab2 = TestClient(app)  # the same server (one job queue), another connection
+    with TestClient(app, base_url=LOCAL) as tab1:
+        tab2 = TestClient(app, base_url=LOCAL)  # the same server (one job queue), another connection
         made: dict[str, tuple[str, dict]] = {}
 
         def work(tab: TestClient, name: str, seed: int) -> None:
@@ -337,7 +340,7 @@ def test_restart_with_a_design_half_done(tmp_path: Path) -> None:
 
     ws_dir = tmp_path / "ws"
     app = create_app(ws_dir)
-    with TestClient(app) as client:
+    with TestClient(app, base_url=LOCAL) as client:
         rid = client.post("/api/runs", json={**pair(client), **LONG}).json()["id"]
         wait_in_stage(client, rid)
         pid = app.state.queue.running()[rid]
@@ -345,7 +348,7 @@ def test_restart_with_a_design_half_done(tmp_path: Path) -> None:
         os.kill(pid, signal.SIGKILL)  # ... and its worker with it
     assert json.loads((ws_dir / "runs" / rid / "run.json").read_text())["status"] == "running"
     again = create_app(ws_dir)
-    with TestClient(again) as client:
+    with TestClient(again, base_url=LOCAL) as client:
         run = client.get(f"/api/runs/{rid}").json()
         assert run["status"] == "interrupted" and "resume" in run["error"]
         assert client.post(f"/api/runs/{rid}/resume").status_code == 200
