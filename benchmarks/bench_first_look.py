@@ -84,10 +84,9 @@ def child(extra: list[str]) -> None:
     from saucerfab.cli.design import given_options
     from saucerfab.fileio import write_bytes_atomic
     from saucerfab.imageio import png_bytes
-    from saucerfab.optimize.looks import LOOK_PNG_LEVEL, first_look_colors, look_images
+    from saucerfab.optimize.looks import LOOK_PNG_LEVEL, look_colors, look_images
     from saucerfab.optimize.prepare import prepare
     from saucerfab.optimize.request import DesignRequest
-    from saucerfab.optimize.stages import ABLATION_STAGES
     from saucerfab.optimize.views import ViewMeshes
     from saucerfab.report import as_uint8_rgb
 
@@ -96,7 +95,7 @@ def child(extra: list[str]) -> None:
     lap("prepare")
     meshes = ViewMeshes(prep.scene, prep.base, reflected_groups=prep.reflected_groups)
     lap("views (numpy)")
-    colors = first_look_colors(meshes, prep, ABLATION_STAGES[req.ablation][0].targets)
+    colors = look_colors(meshes, prep, prep.base)
     lap("projected colours")
     images = look_images(prep.scene, meshes, prep.base, colors)
     lap("renders")

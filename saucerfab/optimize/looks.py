@@ -1,12 +1,19 @@
 """Looks at a running design: quick hard renders written beside it while it runs (issue 18).
 
+Every look shows the designer's own pictures on the saucer's shape at that
+moment, coloured as the texturing step would colour it (each face from the
+pictures of the views that see it: :func:`saucerfab.optimize.targets.projected_colors`
+on the pictures as meant, ``Prepared.render``), so it is a preview of the
+print so far:
+
 * the **first look**, made as soon as the inputs are prepared, before torch
   is imported (on numpy views, :class:`saucerfab.optimize.views.ViewMeshes`):
-  the base shape with the face colours projected from the first stage's
-  targets (what ``--color-init projected`` starts from), i.e. what the
-  saucer shows before any optimisation;
-* a **refined look** after each stage: the current heights with the
-  optimizer's current face colours.
+  the base shape, before any optimisation;
+* a **refined look** after each stage: the current heights.
+
+The optimizer's own face colours are not shown: its first stages aim at the
+black-white enhanced targets (a black subject on blue), which would only
+confuse a designer watching the run; the shape is what the stages change.
 
 Each look is the nearest-face render with one colour per face (as
 :func:`saucerfab.render.render_face_colors_hard` draws it) of every view
@@ -60,21 +67,19 @@ LOOK_SIZE = 256
 LOOK_PNG_LEVEL = 1
 
 
-def first_look_colors(meshes: ViewMeshes, prep: Prepared, targets: str) -> np.ndarray:
-    """(F, 3) face colours in [0, 1] projected from the pictures a stage aims at onto the base shape.
+def look_colors(meshes: ViewMeshes, prep: Prepared, heights: np.ndarray) -> np.ndarray:
+    """(F, 3) face colours in [0, 1]: the pictures as meant projected onto the saucer at ``heights``.
 
-    What :func:`saucerfab.optimize.targets.projected_colors` gives the
-    optimizer for ``--color-init projected``.
+    The texturing step's rule (:func:`saucerfab.optimize.targets.projected_colors`)
+    on ``prep.render``, the inputs fitted into their frames.
 
     Args:
         meshes: the views (a :class:`~saucerfab.optimize.views.Rig` or its torch-free part).
-        targets: the first stage's targets, ``"enhanced"`` or ``"input"``
-            (:attr:`saucerfab.optimize.stages.StageSpec.targets`).
+        heights: (N, N) saucer heights, model units.
     """
     from saucerfab.optimize.targets import projected_colors
 
-    images = prep.enhanced if targets == "enhanced" else prep.render
-    return projected_colors(meshes, prep.base, images)
+    return projected_colors(meshes, np.asarray(heights, np.float64).reshape(meshes.n, meshes.n), prep.render)
 
 
 def look_images(
@@ -133,8 +138,8 @@ class Looks:
         self.folder, self.callback, self.t_start, self.size = Path(folder), callback, t_start, size
         self._warned = False
 
-    def first(self, prep: Prepared, targets: str) -> dict[str, Path]:
-        """The first look: the base shape with the colours projected from the first stage's ``targets``.
+    def first(self, prep: Prepared) -> dict[str, Path]:
+        """The first look: the pictures projected onto the base shape, before any optimisation.
 
         Torch-free (numpy views, :class:`~saucerfab.optimize.views.ViewMeshes`),
         so it can come before torch is imported; the files written.
@@ -142,21 +147,21 @@ class Looks:
         from saucerfab.optimize.views import ViewMeshes
 
         meshes = ViewMeshes(prep.scene, prep.base, reflected_groups=prep.reflected_groups)
-        return self.show(FIRST_LOOK, prep.scene, meshes, prep.base, first_look_colors(meshes, prep, targets))
+        return self.show(FIRST_LOOK, prep, meshes, prep.base)
 
-    def show(
-        self, stage: str, scene: Scene, rig: ViewMeshes, heights: np.ndarray, colors: np.ndarray
-    ) -> dict[str, Path]:
-        """Render, write ``<stage>_<name>.png`` for each image, call the callback; the files written.
+    def show(self, stage: str, prep: Prepared, rig: ViewMeshes, heights: np.ndarray) -> dict[str, Path]:
+        """Render the pictures on the saucer at ``heights`` (N, N), write ``<stage>_<name>.png``, call the callback.
 
-        A file that cannot be written (a full disk) is left out with a note on
-        stderr: the design goes on, and its own writes report the disk.
+        Returns the files written. A file that cannot be written (a full disk)
+        is left out with a note on stderr: the design goes on, and its own
+        writes report the disk.
         """
         from saucerfab.imageio import png_bytes
         from saucerfab.report import as_uint8_rgb
 
         files: dict[str, Path] = {}
-        for name, img in look_images(scene, rig, heights, colors, self.size).items():
+        colors = look_colors(rig, prep, heights)
+        for name, img in look_images(prep.scene, rig, heights, colors, self.size).items():
             path = self.folder / f"{stage}_{name}.png"
             try:
                 files[name] = write_bytes_atomic(path, png_bytes(as_uint8_rgb(img), LOOK_PNG_LEVEL))

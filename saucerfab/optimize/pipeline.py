@@ -199,7 +199,7 @@ def run_design(
         print(f"  note: {note}", file=sys.stderr)
     # the first look, before torch is imported, rho and any stage: what the saucer shows before optimisation
     looks = Looks(ckpt.dir / "previews", look, t_start)
-    looks.first(prep, stages[0].targets)
+    looks.first(prep)
 
     import torch
 
@@ -240,7 +240,7 @@ def run_design(
             ) from None
         ckpt.save(si + 1, h.numpy(), c.numpy(), loop.log, loop.metrics, loop.weights,
                   earlier_s + time.perf_counter() - t_start)
-        looks.show(stages[si].name, prep.scene, rig, h.numpy(), c.numpy())  # the refined look
+        looks.show(stages[si].name, prep, rig, h.numpy().reshape(rig.n, rig.n))  # the refined look
 
     design, previews, energy_log = loop.finish(h, c)
     metrics = loop.metrics
