@@ -21,8 +21,10 @@ STAR = REPO / "samples" / "reflected_star.png"
 
 #: the smallest design the method runs on (verify off: it adds a trial export and a ray trace)
 TINY = {"resolution": 12, "image_size": 32, "max_iters": 4, "verify": False, "record_times": False}
-#: a design long enough to be caught in a stage (cancel, restart): 3 stages of up to 150 iterations
-LONG = {"resolution": 16, "image_size": 48, "max_iters": 150, "verify": False, "record_times": False}
+#: a design long enough to be caught in its first stage (cancel, restart): about 3 s of optimisation on a quiet
+#: machine after the first iteration (at 16 x 16, 48 px it was under 1 s, and on a loaded CI machine the run
+#: sometimes ended before the cancel reached it)
+LONG = {"resolution": 48, "image_size": 160, "max_iters": 300, "verify": False, "record_times": False}
 
 
 def png(rgb: np.ndarray) -> bytes:
@@ -88,12 +90,12 @@ def wait_status(client: Any, run_id: str, wanted: tuple[str, ...], timeout_s: fl
 
 
 def wait_in_stage(client: Any, run_id: str, timeout_s: float = 60.0) -> dict[str, Any]:
-    """Poll until the run's progress shows an optimisation stage under way; returns the run."""
+    """Poll until the run's progress shows its first optimisation stage under way; returns the run."""
     deadline = time.monotonic() + timeout_s
     while True:
         run = client.get(f"/api/runs/{run_id}").json()
         prog = run.get("progress") or {}
-        if run.get("status") == "running" and prog.get("stage") and prog.get("iteration", 0) > 0:
+        if run.get("status") == "running" and prog.get("stage_index") == 0 and prog.get("iteration", 0) > 0:
             return run
         if run.get("status") not in ("queued", "running") or time.monotonic() > deadline:
             raise AssertionError(f"run {run_id} never got into a stage: {run}")

@@ -357,7 +357,7 @@ def test_restart_with_a_design_half_done(tmp_path: Path) -> None:
 
 def test_client_leaving_the_event_stream_mid_run(tmp_path: Path) -> None:
     """Under uvicorn: a client reads one event and disconnects; the run still finishes and the server answers."""
-    import httpx
+    import httpx2 as httpx  # starlette.testclient's client (the dev extra); a real HTTP client here
     import uvicorn
 
     app = create_app(tmp_path / "ws")

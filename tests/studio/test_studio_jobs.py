@@ -81,7 +81,8 @@ def _in_stage(rec: dict, prog: Path) -> bool:
     import json
 
     try:
-        return rec["status"] == "running" and json.loads(prog.read_text()).get("iteration", 0) > 0
+        p = json.loads(prog.read_text())
+        return rec["status"] == "running" and p.get("stage_index") == 0 and p.get("iteration", 0) > 0
     except (OSError, ValueError):
         return False
 
