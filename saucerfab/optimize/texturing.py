@@ -57,6 +57,13 @@ class TextureResult:
     face_panel: np.ndarray
 
 
+#: with more eyes: an eye's colour joins a texel's blend only where it differs from the design
+#: eye's by at most this much (largest channel difference, colours in [0, 1]); where the eyes
+#: disagree more, the design eye's colour stays. 1.0: every eye always joins (a plain weighted
+#: mean); 0.0: the design eye's texture alone (the other eyes shape the relief only)
+EYE_BLEND_MAX_DIFF = 1.0
+
+
 @dataclass
 class EyeViews:
     """A moved eye for :func:`texture_saucer`: its views and where each of its vertices shows the pictures.
@@ -249,8 +256,11 @@ def _blend_eyes(
                 continue
             corners = coords[np.asarray(view.faces)[vf[ok]]]  # (K, 3, 2) design-frame NDC
             ndc = np.einsum("kc,kcd->kd", bary[ok], corners)
-            num[ok] += w * sample_bilinear(pictures[view.name], ndc_to_texel(ndc, t))
-            den[ok] += w
+            col = sample_bilinear(pictures[view.name], ndc_to_texel(ndc, t))
+            agree = np.abs(col - flat[pix[ok]]).max(axis=1) <= EYE_BLEND_MAX_DIFF
+            idx = np.flatnonzero(ok)[agree]
+            num[idx] += w * col[agree]
+            den[idx] += w
         cnt = np.bincount(pix, weights=den, minlength=t * t)
         acc = np.stack([np.bincount(pix, weights=num[:, c], minlength=t * t) for c in range(3)], 1)
         hit = cnt > 0

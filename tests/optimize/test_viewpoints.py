@@ -196,6 +196,16 @@ def test_the_texture_blend_keeps_what_every_eye_agrees_on() -> None:
     assert np.abs(diff.reshape(-1, 3)[good]).max() <= 1
     # where the eyes disagree (the mirror's decal moves with the eye; faces one eye sees in the mirror) texels blend
     assert (plain.texture != blended.texture).any()
+    # ... unless the blend takes only colours that agree with the design eye's within 0: the design eye's texture
+    import saucerfab.optimize.texturing as texturing
+
+    old = texturing.EYE_BLEND_MAX_DIFF
+    try:
+        texturing.EYE_BLEND_MAX_DIFF = 0.0
+        alone = texture_saucer(eyes[0].rig, flat, images, eyes=others, design_weight=0.5)
+    finally:
+        texturing.EYE_BLEND_MAX_DIFF = old
+    np.testing.assert_array_equal(alone.texture, plain.texture)
 
 
 def test_eyes_both_designs_end_to_end_and_records_its_eyes(tmp_path) -> None:  # noqa: ANN001
