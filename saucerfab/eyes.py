@@ -24,7 +24,7 @@ from saucerfab.errors import ConfigError
 
 #: eye modes of ``--eyes`` (``point`` is accepted for ``design``)
 EYE_MODES = ("design", "both", "box")
-#: ``saucerfab design --eyes`` forms (the first is the design default: DesignRequest.eyes)
+#: the forms ``saucerfab design --eyes`` takes (its default: DesignRequest.eyes)
 DESIGN_EYES_USAGE = "point|both|box:W,H[,N]"
 #: a viewer's interpupillary distance, mm (adult mean, about 63-64 mm)
 DEFAULT_IPD_MM = 64.0

@@ -166,14 +166,9 @@ class DesignRequest(_Weights):
     def eye_spec(self) -> EyeSpec:
         """The eyes the design is made for (:attr:`eyes`, :attr:`ipd_mm`), as verify takes them."""
         ipd = DEFAULT_IPD_MM if self.ipd_mm is None else self.ipd_mm
-        if isinstance(self.eyes, str) and self.eyes.strip().lower() in ("design", "verify"):
+        if isinstance(self.eyes, str) and self.eyes.strip().lower() == "design":  # verify's name for point
             raise ConfigError(f"--eyes {self.eyes!r}: a design is made for {DESIGN_EYES_USAGE}")
         return parse_eyes(self.eyes, ipd)
-
-    @property
-    def multi_eye(self) -> bool:
-        """True when the design is made for more than the design eye."""
-        return self.eye_spec().mode != "design"
 
     def fit_by_view(self) -> dict[str, str]:
         """The fit rule of each view (``direct``, ``reflected``, ``reflected2``) from :attr:`fit`.
