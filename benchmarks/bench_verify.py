@@ -59,6 +59,11 @@ def run_pair(pair: str, args: argparse.Namespace, tmp: Path) -> dict:
     res = verify_print(print_dir, eyes=EyeSpec("both"), res=args.res, spp=args.spp, all_formats=False,
                        pictures_dir=(Path(args.keep) / args.label / pair / "verify") if args.keep else None)
     printers = every_printer(design, tmp / pair) if args.all_printers else None
+    decal = None
+    if args.decal:
+        from bench_eyes import decal_scores
+
+        decal = decal_scores(design, res.renders, args.res)
     return {
         "pair": pair,
         "printers": printers,
@@ -72,6 +77,7 @@ def run_pair(pair: str, args: argparse.Namespace, tmp: Path) -> dict:
         "export_s": t_export,
         "verify_s": res.seconds,
         "scores": {f"{v.view}/{v.eye}": v.to_dict() for v in res.files[0].views},
+        "decal": decal,
     }
 
 
@@ -110,10 +116,11 @@ def printers_table(rows: list[dict]) -> str:
 
 
 def table(rows: list[dict], label: str) -> str:
+    decal = any(r.get("decal") for r in rows)
     out = [
         (f"| pair ({label}) | view | design eye dB / SSIM / coverage | left eye dB (shift) | right eye dB (shift) "
-        "| design s | verify s |"),
-        "|---|---|---|---|---|---|---|",
+        + ("| left / right eye vs the flat decal dB " if decal else "") + "| design s | verify s |"),
+        "|---|---|---|---|---|---|---|" + ("---|" if decal else ""),
     ]
     for r in rows:
         for view in ("direct", "reflected"):
@@ -126,7 +133,8 @@ def table(rows: list[dict], label: str) -> str:
                 f"| {r['pair']} | {view} | {db(d)} / {d['ssim']:.2f} / {100 * d['coverage']:.0f}% "
                 f"| {db(le)} ({le['shift_px'][0]:+d},{le['shift_px'][1]:+d}) "
                 f"| {db(ri)} ({ri['shift_px'][0]:+d},{ri['shift_px'][1]:+d}) "
-                f"| {r['design_s']:.0f} | {r['verify_s']:.1f} |"
+                + (f"| {db(r['decal'][view + '/left'])} / {db(r['decal'][view + '/right'])} " if decal else "")
+                + f"| {r['design_s']:.0f} | {r['verify_s']:.1f} |"
             )
     return "\n".join(out)
 
@@ -143,6 +151,9 @@ def main() -> int:
     p.add_argument("--spp", type=int, default=16)
     p.add_argument("--keep", help="keep the verify pictures here (LABEL/PAIR/verify)")
     p.add_argument("--json", help="also write the rows as JSON to this file")
+    p.add_argument("--decal", action="store_true",
+                   help="also score each moved eye against the picture lying flat on the saucer as that eye sees it "
+                   "(bench_eyes.decal_scores: what the perspective of a tilted saucer does is not counted)")
     p.add_argument("--all-printers", action="store_true",
                    help="also export each design for every bundled printer and hold its check to --strict")
     args = p.parse_args()

@@ -24,6 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
     from saucerfab.cups import CUP_SPEC_USAGE
+    from saucerfab.eyes import DEFAULT_IPD_MM
     from saucerfab.scene import paper_scene
 
     default = DesignRequest.default
@@ -115,6 +116,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "pictures as they are), or auto (subject when every picture has a clear subject - an alpha "
         "channel, a mask file, or a subject on a plain background - else none, as for full-bleed photos). "
         f"Default {default('enhancement')}",
+    )
+    p.add_argument(
+        "--eyes",
+        metavar="EYES",
+        help="where the design is made to be seen from: point (the design eye alone, the paper's method), both "
+        "(the design eye and a viewer's two eyes, --ipd-mm apart) or box:W,H[,N] (an N x N grid of eyes, W x H mm, "
+        "around the design eye; N default 3); millimetres at the design's cup size. Each eye adds its own direct "
+        "and reflected renders to every iteration (about 2x the time for both). The eyes 'saucerfab verify "
+        f"--eyes' scores. Default {default('eyes')}",
+    )
+    p.add_argument(
+        "--ipd-mm",
+        type=float,
+        help=f"distance between the viewer's eyes with --eyes both (default {DEFAULT_IPD_MM:g} mm)",
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON on stdout (progress stays on stderr)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")

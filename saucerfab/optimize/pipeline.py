@@ -55,6 +55,7 @@ if TYPE_CHECKING:
     import torch
 
     from saucerfab.optimize.solver import Objective
+    from saucerfab.optimize.viewpoints import EyeRig
     from saucerfab.optimize.views import Rig
 
 #: progress(stage, iteration, max_iterations, parts, elapsed_s)
@@ -204,10 +205,15 @@ def run_design(
     import torch
 
     from saucerfab.optimize.views import Rig
+    from saucerfab.optimize.viewpoints import eye_rigs
 
     torch.manual_seed(request.seed)
     rig = Rig(prep.scene, prep.base, reflected_groups=prep.reflected_groups)
-    loop = _StageLoop(request, prep, rig, stages, progress or _print_progress, log_every_s, t_start)
+    # --eyes: one rig per eye, each with its own reflection (the design eye's is ``rig``)
+    spec = request.eye_spec()
+    eyes = [] if spec.mode == "design" else eye_rigs(prep.scene, prep.base, spec, prep.reflected_groups,
+                                                     rig_class=Rig, design_rig=rig)
+    loop = _StageLoop(request, prep, rig, stages, progress or _print_progress, log_every_s, t_start, eyes)
 
     first = 0
     earlier_s = 0.0  # wall time of earlier (interrupted) runs that the checkpoint carries
@@ -293,14 +299,21 @@ class _StageLoop:
         progress: Progress,
         log_every_s: float,
         t_start: float,
+        eyes: list[EyeRig] | None = None,
     ) -> None:
         import torch
+
+        from saucerfab.optimize.viewpoints import decal_height
 
         from saucerfab.optimize.energies import TERMS, Problem
         from saucerfab.optimize.printable import CrestProjection
         from saucerfab.optimize.targets import compatibility
 
         self.request, self.prep, self.rig, self.stages = request, prep, rig, stages
+        #: the eyes of --eyes (the design eye first), or [] for the design eye alone (the paper)
+        self.eyes = list(eyes or [])
+        self.z0 = decal_height(prep.base)
+        self._eye_targets: dict[tuple[str, float], list[list[Any]]] = {}
         self.progress, self.log_every_s, self.t_start = progress, log_every_s, t_start
         self.dtype = torch.float32
         scene = prep.scene
@@ -346,6 +359,34 @@ class _StageLoop:
                                                       dtype=self.dtype)
         return self._targets[key]
 
+    def eye_targets_for(self, kind: str, sigma: float) -> list[list[Any]]:
+        """Per eye after the design eye, its blur-matched targets in its views' order: each view's
+        picture as that eye should see it (:func:`saucerfab.optimize.viewpoints.decal_images`)."""
+        from saucerfab.optimize.targets import blur_matched_targets
+        from saucerfab.optimize.viewpoints import decal_images
+
+        key = (kind, sigma)
+        if key not in self._eye_targets:
+            out = []
+            for eye in self.eyes[1:]:
+                pics = decal_images(self.prep.scene, eye, self.prep.base, self._images(kind), self.z0)
+                t = blur_matched_targets(eye.rig, self.prep.base, pics, sigma, dtype=self.dtype)
+                out.append([t[v.name] for v in eye.rig.views])
+            self._eye_targets[key] = out
+        return self._eye_targets[key]
+
+    def e_visual_eyes(self, spec: StageSpec, design_part: torch.Tensor, hh: torch.Tensor,
+                      cc: torch.Tensor) -> torch.Tensor:
+        """E_visual over the eyes: the design eye's ``design_part`` and each other eye's, weighted
+        (:func:`saucerfab.eyes.eye_weights`) and scaled to the design eye's pixels
+        (:attr:`~saucerfab.optimize.viewpoints.EyeRig.area_factor`), added in eye order."""
+        from saucerfab.optimize.energies import e_visual
+
+        total = self.eyes[0].weight * design_part
+        for eye, targets in zip(self.eyes[1:], self.eye_targets_for(spec.targets, spec.sigma), strict=True):
+            total = total + (eye.weight * eye.area_factor) * e_visual(eye.rig.render(hh, cc, spec.sigma), targets)
+        return total
+
     def start(self) -> tuple[torch.Tensor, torch.Tensor]:
         """The starting iterate: the base heights and grey (or projected) colours, strictly feasible."""
         import torch
@@ -384,8 +425,14 @@ class _StageLoop:
         smooth = [(t.key, fn, term_weight(spec, t, values)) for t, fn in self.energies if t.prox is None]
         rig, sigma = self.rig, spec.sigma
 
+        multi = bool(self.eyes)
+        if multi:
+            self.eye_targets_for(spec.targets, sigma)  # made once, before the solver's clock
+
         def objective(hh: torch.Tensor, cc: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
             ev = e_visual(rig.render(hh, cc, sigma), targets)
+            if multi:  # --eyes: the weighted sum over the eyes (the design eye alone: the paper's, untouched)
+                ev = self.e_visual_eyes(spec, ev, hh, cc)
             terms = [(key, w, fn(hh, cc)) for key, fn, w in smooth]
             total = ev
             for _, w, e in terms:
@@ -450,7 +497,9 @@ class _StageLoop:
         face_view = classify_faces(visible_faces(rig, h.numpy().reshape(rig.n, rig.n)))
         seen = (face_view != FaceView.NEITHER).sum()
         with torch.no_grad():
-            ev = float(e_visual(rig.render(h, c, spec.sigma), target_list))
+            ev_t = e_visual(rig.render(h, c, spec.sigma), target_list)
+            ev = float(ev_t)
+            eyes_part = {"E_visual_eyes": float(self.e_visual_eyes(spec, ev_t, h, c))} if self.eyes else {}
         reported: dict[str, float | None] = {}
         for t, fn in self.energies:
             if t.in_metrics and t.prox is None:
@@ -471,6 +520,7 @@ class _StageLoop:
                 "seconds": res.seconds,
                 "seconds_per_iteration": res.seconds / max(res.iterations, 1),
                 "E_visual": ev,
+                **eyes_part,
                 **reported,
                 # share of the seen faces seen both directly and in a reflection
                 "conflict_fraction": float((face_view == FaceView.BOTH).sum() / max(seen, 1)),
@@ -491,7 +541,18 @@ class _StageLoop:
         prep, rig, metrics, request = self.prep, self.rig, self.metrics, self.request
         t0 = time.perf_counter()
         heights = h.numpy().astype(np.float64).reshape(rig.n, rig.n)
-        tex = texture_saucer(rig, heights, prep.texture)
+        if self.eyes:
+            from saucerfab.optimize.texturing import EyeViews
+            from saucerfab.optimize.viewpoints import design_frame_ndc
+
+            others = [
+                EyeViews(e.weight, e.rig, {v.name: design_frame_ndc(prep.scene, e.scene, v, heights, self.z0)
+                                           for v in e.rig.views})
+                for e in self.eyes[1:]
+            ]
+            tex = texture_saucer(rig, heights, prep.texture, eyes=others, design_weight=self.eyes[0].weight)
+        else:
+            tex = texture_saucer(rig, heights, prep.texture)
         metrics["texturing_s"] = time.perf_counter() - t0
         metrics["face_views"] = {fv.name.lower(): int((tex.face_view == fv).sum()) for fv in FaceView}
         metrics["max_abs_height_change"] = float(np.abs(heights - prep.base).max())
@@ -508,7 +569,8 @@ class _StageLoop:
             texture=tex.texture,
             face_uvs=tex.face_uvs,
             face_view=tex.face_view,
-            parameters=_parameters(request, self.weights, self.rho, self.stages, prep.enhancement, prep.target),
+            parameters=_parameters(request, self.weights, self.rho, self.stages, prep.enhancement, prep.target,
+                                   self.eyes),
             metrics=metrics,
             inputs=prep.inputs,
             # the inputs as meant, at the texture's detail: what verify compares prints with
@@ -542,8 +604,19 @@ def _parameters(
     stages: list[StageSpec],
     enhancement: dict[str, str] | None,
     target: PrintTarget | None = None,
+    eyes: list[EyeRig] | None = None,
 ) -> dict[str, Any]:
     d = asdict(request)
+    if eyes:
+        # the eyes the design was made for: mm from the design eye along the direct view's right and up
+        d["ipd_mm"] = request.eye_spec().ipd_mm if request.eye_spec().mode == "both" else None
+        d["eyes_used"] = [
+            {"name": e.eye.name, "offset_mm": list(e.eye.offset_mm), "weight": e.weight} for e in eyes
+        ]
+    else:
+        # the design eye alone (the paper): the folder as before --eyes existed, byte for byte
+        d.pop("eyes", None)
+        d.pop("ipd_mm", None)
     for k, v in list(d.items()):
         if isinstance(v, Path):
             d[k] = v.name

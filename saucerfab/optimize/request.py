@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, make_dataclass
 from pathlib import Path
 
 from saucerfab.errors import ConfigError
+from saucerfab.eyes import DEFAULT_IPD_MM, DESIGN_EYES_USAGE, EyeSpec, parse_eyes
 from saucerfab.heightfield import HEIGHT_SCALE
 from saucerfab.images import FITS
 from saucerfab.optimize.energies import WEIGHTS
@@ -122,6 +123,17 @@ class DesignRequest(_Weights):
             prism to the placement whose facet regions overlap least
             (:func:`saucerfab.optimize.regions.best_placement`); "as_given"
             keeps the cup's rotation.
+        eyes: where the design is optimised for (:mod:`saucerfab.eyes`, one definition
+            with ``saucerfab verify``): "point" (the paper: the design eye alone),
+            "both" (the design eye and a viewer's two eyes, ``ipd_mm`` apart along the
+            direct view's right axis) or "box:W,H[,N]" (an N x N grid of eyes, W x H mm,
+            around the design eye). Millimetres at the design's scale
+            (``cup_diameter_mm``). E_visual sums over the eyes, each with its own
+            direct and reflected views (:mod:`saucerfab.optimize.viewpoints`,
+            weights :func:`saucerfab.eyes.eye_weights`), and the texturing blends
+            what each eye wants. Measured in benchmarks/RESULTS.md (Eyes).
+        ipd_mm: the distance between a viewer's eyes with ``eyes="both"`` (None: 64 mm,
+            :data:`saucerfab.eyes.DEFAULT_IPD_MM`); refused with the other modes.
     """
 
     direct: Path
@@ -148,6 +160,15 @@ class DesignRequest(_Weights):
     prism_placement: str = PRISM_PLACEMENTS[0]
     color_init: str = COLOR_INITS[0]
     record_times: bool = True
+    eyes: str = "point"
+    ipd_mm: float | None = None
+
+    def eye_spec(self) -> EyeSpec:
+        """The eyes the design is made for (:attr:`eyes`, :attr:`ipd_mm`), as verify takes them."""
+        ipd = DEFAULT_IPD_MM if self.ipd_mm is None else self.ipd_mm
+        if isinstance(self.eyes, str) and self.eyes.strip().lower() == "design":  # verify's name for point
+            raise ConfigError(f"--eyes {self.eyes!r}: a design is made for {DESIGN_EYES_USAGE}")
+        return parse_eyes(self.eyes, ipd)
 
     def fit_by_view(self) -> dict[str, str]:
         """The fit rule of each view (``direct``, ``reflected``, ``reflected2``) from :attr:`fit`.
@@ -197,6 +218,22 @@ class DesignRequest(_Weights):
             raise ConfigError(f"cup_diameter_mm must be a positive number of millimetres, got {v!r}")
         if not isinstance(self.printer, str) or not self.printer:
             raise ConfigError(f"printer must be a profile name such as 'j55' or a .toml path, got {self.printer!r}")
+        if not isinstance(self.eyes, str):
+            raise ConfigError(f"eyes must be one of {DESIGN_EYES_USAGE}, got {self.eyes!r}")
+        if self.ipd_mm is not None and (isinstance(self.ipd_mm, bool) or not isinstance(self.ipd_mm, (int, float))):
+            raise ConfigError(f"ipd_mm must be a distance in mm, got {self.ipd_mm!r}")
+        spec = self.eye_spec()  # refuses a bad --eyes or --ipd-mm now, before any work
+        if self.ipd_mm is not None and spec.mode != "both":
+            what = "the design eye alone" if spec.mode == "design" else "an eye box (its size is box:W,H)"
+            raise ConfigError(
+                f"--ipd-mm {self.ipd_mm:g} sets the distance between a viewer's two eyes, but --eyes {self.eyes} is "
+                f"{what}; drop --ipd-mm, or give --eyes both"
+            )
+        if spec.mode != "design" and self.reflected2 is not None:
+            raise ConfigError(
+                f"--eyes {self.eyes} is not supported with a second reflected image (--reflected2) yet; "
+                "give --eyes point"
+            )
         if self.max_iters < 1:
             raise ConfigError(f"max_iters must be at least 1, got {self.max_iters}")
         for w in WEIGHTS:

@@ -15,6 +15,14 @@ colours there (the paper's rule). Faces seen in neither keep their
 direct-view projection (clamped to the panel); the fabrication bake gives
 them a smooth continuation of their neighbours' colours.
 
+With more eyes than the design eye (``--eyes both``, :class:`EyeViews`), the
+texture keeps the design eye's layout (its panels and face coordinates) and
+each texel under a face seen by the design eye becomes the weighted mean of
+what every eye wants there: the design eye's panel colour (weight: its eye
+weight) and, for every other eye and every view in which that eye sees the
+face, that view's picture where the eye sees the texel's point on the
+picture's decal (:mod:`saucerfab.optimize.viewpoints`), with that eye's weight.
+
 Visibility (:func:`saucerfab.optimize.views.visible_faces`) is read from the
 hard rasterizer's face buffer at ``supersample`` times the view's
 resolution, so faces smaller than a pixel are not lost.
@@ -23,6 +31,7 @@ resolution, so faces smaller than a pixel are not lost.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -46,6 +55,29 @@ class TextureResult:
     face_uvs: np.ndarray
     face_view: np.ndarray
     face_panel: np.ndarray
+
+
+#: with more eyes: an eye's colour joins a texel's blend only where it differs from the design
+#: eye's by at most this much (largest channel difference, colours in [0, 1]); where the eyes
+#: disagree more, the design eye's colour stays. 1.0: every eye always joins (a plain weighted
+#: mean); 0.0: the design eye's texture alone (the other eyes shape the relief only)
+EYE_BLEND_MAX_DIFF = 1.0
+
+
+@dataclass
+class EyeViews:
+    """A moved eye for :func:`texture_saucer`: its views and where each of its vertices shows the pictures.
+
+    Attributes:
+        weight: the eye's weight in the blend (:func:`saucerfab.eyes.eye_weights`).
+        rig: the eye's views (:class:`~saucerfab.optimize.views.ViewMeshes` or a Rig).
+        coords: view name -> (V', 2) NDC in the design eye's frame of that view, per vertex of the eye's
+            view at the final heights (:func:`saucerfab.optimize.viewpoints.design_frame_ndc`).
+    """
+
+    weight: float
+    rig: Any
+    coords: dict[str, np.ndarray]
 
 
 def classify_faces(visible: dict[str, np.ndarray]) -> np.ndarray:
@@ -121,6 +153,8 @@ def texture_saucer(
     images: dict[str, np.ndarray],
     *,
     supersample: int = 2,
+    eyes: list[EyeViews] | None = None,
+    design_weight: float = 1.0,
 ) -> TextureResult:
     """Texture the saucer with the input images (section 3.4.2).
 
@@ -128,6 +162,8 @@ def texture_saucer(
         heights: (N, N) final heights.
         images: view name -> (T, T, 3) float image in [0, 1] covering that
             view's frame (all the same T; may exceed the render size).
+        eyes: the other eyes the design is made for (none: the paper's texturing).
+        design_weight: the design eye's weight in the blend with ``eyes``.
     """
     names = [v.name for v in rig.views]
     k = len(names)
@@ -170,9 +206,65 @@ def texture_saucer(
             acc = np.stack([np.bincount(pix, weights=col_d[:, c], minlength=t * t) for c in range(3)], 1)
             hit = cnt > 0
             flat[hit] = 0.5 * (flat[hit] + acc[hit] / cnt[hit, None])
+    if eyes:
+        _blend_eyes(panels, face_uvs, face_panel, face_view, h, images, eyes, design_weight)
     texture = np.concatenate(panels, axis=1)
     texture8 = np.clip(np.rint(texture * 255), 0, 255).astype(np.uint8)
     return TextureResult(texture8, face_uvs.astype(np.float32), face_view, face_panel)
+
+
+def _blend_eyes(
+    panels: list[np.ndarray],
+    face_uvs: np.ndarray,
+    face_panel: np.ndarray,
+    face_view: np.ndarray,
+    h: np.ndarray,
+    images: dict[str, np.ndarray],
+    eyes: list[EyeViews],
+    design_weight: float,
+) -> None:
+    """Blend, in place, each panel's texels under the design eye's seen faces with what the other eyes want."""
+    k = len(panels)
+    t = panels[0].shape[0]
+    pictures = {n: np.clip(v, 0, 1).astype(np.float64) for n, v in images.items()}
+    # per eye and view: visibility of the saucer faces, and saucer face -> the view's face
+    seen_by = []
+    for eye in eyes:
+        vis = visible_faces(eye.rig, h.reshape(eye.rig.n, eye.rig.n))
+        for view in eye.rig.views:
+            fsrc = np.asarray(view.face_src)
+            inv = np.full(face_panel.shape[0], -1, np.int64)
+            inv[fsrc] = np.arange(fsrc.shape[0])
+            seen_by.append((eye.weight, view, eye.coords[view.name], vis[view.name], inv))
+    for p in range(k):
+        on_p = np.flatnonzero((face_panel == p) & (face_view != FaceView.NEITHER))
+        if not on_p.size:
+            continue
+        uv = face_uvs[on_p].astype(np.float64)
+        tri = np.stack([(uv[..., 0] * k - p) * t, (1.0 - uv[..., 1]) * t], axis=-1)
+        pix, ti, bary = raster_triangles_2d(tri, t, t)
+        if not pix.size:
+            continue
+        f = on_p[ti]
+        flat = panels[p].reshape(-1, 3)
+        num = design_weight * flat[pix]
+        den = np.full(pix.shape[0], float(design_weight))
+        for w, view, coords, vis, inv in seen_by:
+            vf = inv[f]
+            ok = (vf >= 0) & vis[f]
+            if not ok.any():
+                continue
+            corners = coords[np.asarray(view.faces)[vf[ok]]]  # (K, 3, 2) design-frame NDC
+            ndc = np.einsum("kc,kcd->kd", bary[ok], corners)
+            col = sample_bilinear(pictures[view.name], ndc_to_texel(ndc, t))
+            agree = np.abs(col - flat[pix[ok]]).max(axis=1) <= EYE_BLEND_MAX_DIFF
+            idx = np.flatnonzero(ok)[agree]
+            num[idx] += w * col[agree]
+            den[idx] += w
+        cnt = np.bincount(pix, weights=den, minlength=t * t)
+        acc = np.stack([np.bincount(pix, weights=num[:, c], minlength=t * t) for c in range(3)], 1)
+        hit = cnt > 0
+        flat[hit] = acc[hit] / cnt[hit, None]
 
 
 def ndc_to_texel(ndc_xy: np.ndarray, size: int) -> np.ndarray:

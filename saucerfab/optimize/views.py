@@ -52,6 +52,9 @@ class ViewMesh:
     face_src: np.ndarray | torch.Tensor
     #: the direct view takes every vertex and face in order: no gather needed
     identity: bool = False
+    #: a reflected view's (V', 5) float64 mirror at each vertex: T's xy, the cup's outward
+    #: normal there, the prism facet (-1: smooth cup); None for the direct view
+    mirror: np.ndarray | None = None
 
     def vertices_np(self, h: np.ndarray) -> np.ndarray:
         """(V', 3) float64 vertices for saucer heights ``h`` ((N, N) or (V,), model units)."""
@@ -131,7 +134,7 @@ class ViewMeshes:
             for name, facets in zip(names, reflected_groups):
                 groups.append((name, [p for p in pieces if p.facet in set(facets)]))
         for name, group in groups:
-            xs, srcs, faces, fsrc = [], [], [], []
+            xs, srcs, faces, fsrc, mirror = [], [], [], [], []
             offset = 0
             for piece in group:
                 ok = piece.valid(h_flat, scene.cup.height)
@@ -145,9 +148,12 @@ class ViewMeshes:
                 srcs.append(keep)
                 faces.append(remap[self.faces_np[face_ok]])
                 fsrc.append(np.flatnonzero(face_ok))
+                mirror.append(np.concatenate([piece.t_xy[keep], piece.normal_xy[keep],
+                                              np.full((keep.size, 1), float(piece.facet))], axis=1))
                 offset += keep.size
             if not faces:
                 xs, srcs, faces, fsrc = [np.zeros((0, 2))], [np.zeros(0, np.int64)], [np.zeros((0, 3), np.int64)], [np.zeros(0, np.int64)]
+                mirror = [np.zeros((0, 5))]
             self.views.append(
                 ViewMesh(
                     name,
@@ -156,6 +162,7 @@ class ViewMeshes:
                     np.concatenate(srcs),
                     np.concatenate(faces),
                     np.concatenate(fsrc),
+                    mirror=np.concatenate(mirror),
                 )
             )
         self.views = [self._finish(v) for v in self.views]
@@ -184,7 +191,8 @@ class Rig(ViewMeshes):
         import torch
 
         return View(mesh.name, mesh.camera, torch.as_tensor(mesh.xy), torch.as_tensor(mesh.vert_src),
-                    torch.as_tensor(mesh.faces), torch.as_tensor(mesh.face_src), identity=mesh.identity)
+                    torch.as_tensor(mesh.faces), torch.as_tensor(mesh.face_src), identity=mesh.identity,
+                    mirror=mesh.mirror)
 
     def render(
         self,
