@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from saucerfab.check.limits import Limits
+from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
 from saucerfab.check.readers.safe import DiskResources, Resources
 
@@ -199,9 +199,10 @@ def _parse(data: bytes, limits: Limits, b: MeshBuilder
     """The reference parse: (V, vertex colours or None, UV, material names, fv, ft, fmat, triangles missing UVs)."""
     counts = _count_statements(data, {b"v": limits.max_vertices, b"vt": limits.max_vertices, b"f": limits.max_triangles})
     nv, nvt, nf = counts[b"v"], counts[b"vt"], counts[b"f"]
-    b.reserve(nv, nf, "the OBJ")
+    b.reserve(nv, nf, "the OBJ", at_least=True)  # the counts stop once past a cap
     if nvt > limits.max_vertices:
-        raise ReadError("over_check_limit", f"the OBJ has {nvt:,} 'vt' lines, over Limits.max_vertices")
+        raise ReadError("over_check_limit", f"the OBJ has over {limits.max_vertices:,} 'vt' lines "
+                                            f"(Limits.max_vertices); {raise_hint()}")
     v_pay = _V.findall(data)
     vt_pay = _VT.findall(data)
     fm = _F_OR_MTL.findall(data)
@@ -382,7 +383,7 @@ def _faces_slow(data: bytes, nv_total: int, nvt_total: int, limits: Limits
         nface += 1
         if len(fv) > limits.max_triangles:
             raise ReadError("over_check_limit", f"the OBJ's polygons make over {limits.max_triangles:,} triangles "
-                                                "(Limits.max_triangles; --max-triangles raises it)")
+                                                f"(Limits.max_triangles); {raise_hint()}")
     fva = np.array(fv, dtype=np.int64).reshape(-1, 3)
     fta = np.array(ft, dtype=np.int64).reshape(-1, 3)
     _check_range(fva, nv_total, "vertex")

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.check.limits import Limits
+from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
 from saucerfab.check.readers.safe import DiskResources, Resources
 
@@ -263,7 +263,7 @@ class _Parser:
                 raise ReadError(
                     "over_check_limit",
                     f"VRML: a number array holds over {cap:,} numbers, more than the checker's limits allow "
-                    "(3 x Limits.max_vertices coordinates, 4 x Limits.max_triangles indices)",
+                    f"(3 x Limits.max_vertices coordinates, 4 x Limits.max_triangles indices); {raise_hint()}",
                 )
             try:
                 parts.append(np.array(piece, dtype=np.float64))
@@ -539,7 +539,8 @@ def read_vrml(path: Path, data: bytes, limits: Limits, res: Resources | None = N
         raise ReadError(
             "over_check_limit",
             f"the VRML scene instances about {tri:,} triangles in {shapes:,} shapes (DEF/USE), over the checker's "
-            f"limits (Limits.max_triangles / --max-triangles, Limits.max_parts)",
+            f"limits ({limits.max_triangles:,} triangles, Limits.max_triangles; {limits.max_parts:,} shapes, "
+            "Limits.max_parts)" + (f"; {raise_hint(tri)}" if shapes <= limits.max_parts else ""),
         )
     if visits > limits.max_node_visits:
         raise ReadError(

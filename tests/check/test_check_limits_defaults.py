@@ -1,0 +1,128 @@
+"""The checker's default limits (issue 16): any single file judged in at most 10 s and 1 GiB.
+
+The defaults bound the worst file within all of them together (500,000
+triangles as a soup of 1.5 million vertices, one 8192 x 8192 texture);
+``benchmarks/bench_check_hostile.py --large`` measures it. These tests hold
+the cheap parts: a file over a cap is refused from its header, naming the
+limit, the option that raises it and its price; the option raises the caps
+that grow with a mesh; the self-intersection search bounds its exact tests.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fixtures_check as fx
+from saucerfab.check import Limits, check_mesh
+from saucerfab.check.limits import COST_PER_MILLION_TRIANGLES
+from saucerfab.check.readers import read_mesh
+
+
+def sparse_binary_stl(path: Path, n: int) -> Path:
+    """A binary STL whose header states ``n`` triangles and whose size matches (sparse: all zeros)."""
+    with open(path, "wb") as fh:
+        fh.write(b"header".ljust(80, b" ") + struct.pack("<I", n))
+        fh.truncate(84 + 50 * n)
+    return path
+
+
+def test_defaults_keep_every_file_within_10_s_and_1_gib() -> None:
+    """The measured budget (benchmarks/RESULTS.md): 500 k triangles, 3 vertices each, one 8192^2 texture."""
+    lim = Limits()
+    assert lim.max_triangles == 500_000 and lim.max_vertices == 3 * lim.max_triangles
+    assert lim.max_total_texture_pixels == lim.max_texture_pixels == 8192 * 8192
+    assert lim.max_file_bytes == 256 << 20 and lim.max_texture_bytes == 128 << 20
+
+
+def test_one_triangle_over_the_default_is_refused_from_the_header(tmp_path: Path) -> None:
+    n = Limits().max_triangles + 1
+    p = sparse_binary_stl(tmp_path / "over.stl", n)
+    t = time.perf_counter()
+    r = check_mesh(p)
+    assert time.perf_counter() - t < 2.0
+    assert r.exit_code == 2 and r.codes == {"over_check_limit"}, r.reason()
+    reason = r.reason()
+    assert f"{n:,}" in reason and "Limits.max_triangles" in reason
+    assert f"--max-triangles {n}" in reason and COST_PER_MILLION_TRIANGLES in reason  # how to raise it, and its price
+    # PLY and OBJ headers and counts likewise
+    ply = tmp_path / "over.ply"
+    ply.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                    b"property float z\nelement face %d\nproperty list uchar int vertex_indices\nend_header\n" % n
+                    + bytes(36 + 13 * n))
+    r = check_mesh(ply)
+    assert r.exit_code == 2 and "Limits.max_triangles" in r.reason() and "--max-triangles" in r.reason()
+
+
+def test_the_option_raises_the_caps_that_grow_with_a_mesh(tmp_path: Path) -> None:
+    base = Limits()
+    n = base.max_triangles + 1
+    lim = base.for_triangles(n)
+    assert lim.max_triangles == n and lim.max_vertices == 3 * n
+    assert lim.max_file_bytes >= base.max_file_bytes and lim.max_uncompressed_bytes >= base.max_uncompressed_bytes
+    big = base.for_triangles(4 * base.max_triangles)
+    assert big.max_file_bytes == 4 * base.max_file_bytes and big.max_vertices == 12 * base.max_triangles
+    low = base.for_triangles(100)  # lowering the triangle cap leaves the others alone
+    assert low.max_triangles == 100 and low.max_vertices == base.max_vertices
+    with pytest.raises(ValueError):
+        base.for_triangles(0)
+    # the file one over the default is read with the option (an STL: three vertices a triangle)
+    md = read_mesh(sparse_binary_stl(tmp_path / "over.stl", n), lim)
+    assert len(md.faces) == n
+
+
+def test_raised_to_never_lowers() -> None:
+    base = Limits()
+    same = base.raised_to(triangles=10, texture_px=64, file_bytes=10, inflated_bytes=10)
+    assert same == base
+    up = base.raised_to(triangles=2_000_000, texture_px=16384, file_bytes=3 << 30, inflated_bytes=5 << 30)
+    assert up.max_triangles == 2_000_000 and up.max_vertices == 6_000_000
+    assert up.max_texture_pixels == up.max_total_texture_pixels == 16384**2
+    assert up.max_file_bytes == up.max_texture_bytes == 3 << 30 and up.max_uncompressed_bytes == 5 << 30
+
+
+def test_3mf_texture_coordinates_are_counted_apart_from_vertices(tmp_path: Path) -> None:
+    """A textured 3MF soup of T triangles has 3 T vertices and 3 T texture coordinates: within max_vertices = 3 T."""
+    V, F, uv = fx.saucer_solid(12)
+    Vs, Fs = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    p = fx.write_3mf(tmp_path / "soup.3mf", Vs, Fs, uv=uv[F].reshape(-1, 2), texture=fx.png_bytes())
+    lim = Limits(max_triangles=len(F), max_vertices=3 * len(F))
+    r = check_mesh(p, limits=lim)
+    assert r.exit_code != 2, r.reason()
+    r = check_mesh(p, limits=lim.with_(max_vertices=3 * len(F) - 1))
+    assert r.exit_code == 2 and "Limits.max_vertices" in r.reason()
+
+
+def test_exact_pair_tests_are_capped(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A pile of overlapping triangles: the exact test sees at most a quarter of the node-pair budget."""
+    from saucerfab.check import intersections
+
+    seen = []
+    real = intersections.pair_intersections
+
+    def counting(tri, Fg, nrm, a, b, eps):  # type: ignore[no-untyped-def]
+        seen.append(len(a))
+        return real(tri, Fg, nrm, a, b, eps)
+
+    monkeypatch.setattr(intersections, "pair_intersections", counting)
+    rng = np.random.default_rng(11)
+    V = rng.random((30_000, 3)) * 3
+    F = np.arange(30_000).reshape(-1, 3)
+    r = check_mesh(fx.write_stl(tmp_path / "pile.stl", V, F), limits=Limits(max_pair_tests=400_000))
+    assert sum(seen) <= 100_000, sum(seen)
+    assert r.stats["self_intersection_check"] == "partial" and "check_partial" in r.codes
+    assert r.stats["self_intersecting_pairs"] > 0 and "self_intersections" in r.codes
+
+
+def test_cli_help_says_the_default_and_the_price(capsys: pytest.CaptureFixture[str]) -> None:
+    from saucerfab.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["check", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "--max-triangles N" in out and f"default {Limits().max_triangles:,}" in out
+    assert "1 GB of memory and 15 s per million triangles" in out
