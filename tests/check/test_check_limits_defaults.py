@@ -126,3 +126,16 @@ def test_cli_help_says_the_default_and_the_price(capsys: pytest.CaptureFixture[s
     out = " ".join(capsys.readouterr().out.split())
     assert "--max-triangles N" in out and f"default {Limits().max_triangles:,}" in out
     assert "1 GB of memory and 15 s per million triangles" in out
+
+
+def test_vrml_is_read_up_to_max_triangles(tmp_path: Path) -> None:
+    """A VRML triangle list ('a b c -1') of exactly max_triangles is read; one more is refused.
+
+    (The pre-allocation check estimated half the index count - twice the triangles - and refused an
+    honest VRML at half the limit.)
+    """
+    V, F, _ = fx.saucer_solid(12)
+    p = fx.write_vrml(tmp_path / "m.wrl", V, F)
+    assert len(read_mesh(p, Limits(max_triangles=len(F))).faces) == len(F)
+    r = check_mesh(p, limits=Limits(max_triangles=len(F) - 1))
+    assert r.exit_code == 2 and "Limits.max_triangles" in r.reason()

@@ -406,7 +406,7 @@ class _Walker:
             raise ReadError("malformed", "VRML: Coordinate point count is not a multiple of 3")
         V = pts.reshape(-1, 3)
         ci = _nums(f.get("coordIndex"), "coordIndex")
-        self.b.reserve(len(V), max(0, len(ci) // 2), "VRML IndexedFaceSet")
+        self.b.reserve(len(V), _fan_count(ci), "VRML IndexedFaceSet")
         F, corner_of = _polygons(ci, "coordIndex")
         if not _bool(f.get("ccw"), True):
             F = F[:, ::-1]
@@ -485,6 +485,17 @@ def _children(v: Any) -> list[Any]:
     if isinstance(v, list):
         return [c for c in v if isinstance(c, Node)]
     return []
+
+
+def _fan_count(ci: np.ndarray) -> int:
+    """How many fan triangles :func:`_polygons` makes of a -1-separated index list (a k-gon: k - 2), exactly.
+
+    (Half the list's length, the estimate before, refused an honest mesh
+    of triangles - four indices each - at half ``Limits.max_triangles``.)
+    """
+    ends = np.flatnonzero(ci == -1)
+    k = np.diff(np.concatenate([[-1], ends, [len(ci)]])) - 1  # polygon lengths, the trailing one too
+    return int(np.maximum(k - 2, 0).sum())
 
 
 def _polygons(ci: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:
