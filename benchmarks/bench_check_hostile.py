@@ -22,7 +22,7 @@ built at the limits themselves (``Limits()``): per format a closed mesh of
 (8192 x 8192); a GLB soup embedding a noisy texture near
 ``max_texture_bytes``; ASCII STL, ASCII PLY and OBJ soups padded to
 ``max_file_bytes``; a pile of ``max_triangles`` overlapping triangles
-(self-intersection budget); box instances up to ``max_triangles``. They
+(self-intersection budget); ``max_parts`` parts sharing ``max_triangles`` in 3MF, GLB and VRML. They
 cost what checking that much costs, and are what the defaults are chosen
 by. A warm-up child compiles the numba kernels first, as ``make install``
 does, so no case pays compile time.
@@ -344,9 +344,47 @@ LARGE: list[tuple[str, str, Callable[[Path], Path]]] = [
      lambda d: _padded(d / "a.obj", "obj")),
     ("pile-stl", "binary STL, max_triangles overlapping triangles in a 2 mm cube (self-intersection budget)",
      lambda d: _pile(d / "pile.stl")),
-    ("gltf-instances-max", "GLB, instances of a box up to max_triangles",
-     lambda d: _instances(d / "inst.glb", _limits().max_triangles // 12)),
+    *[(f"parts-{ext}", f"{ext.upper()}, max_parts {what} of max_triangles / max_parts triangles each",
+       (lambda e: lambda d: _parts(d / f"p.{e}"))(ext))
+      for ext, what in (("3mf", "objects (build items)"), ("glb", "instances of one mesh"), ("wrl", "shapes"))],
 ]
+
+
+def _parts(path: Path) -> Path:
+    """``max_parts`` closed parts (double cones) sharing ``max_triangles``: what each part costs of its own."""
+    lim = _limits()
+    n, t = lim.max_parts, lim.max_triangles // lim.max_parts
+    k = max(3, t // 2)  # a ring of k points and two apexes: 2 k triangles
+    ang = np.linspace(0, 2 * np.pi, k, endpoint=False)
+    ring = np.stack([0.5 + 0.5 * np.cos(ang), 0.5 + 0.5 * np.sin(ang), np.full(k, 0.5)], axis=1)
+    V = np.concatenate([ring, [[0.5, 0.5, 1.0], [0.5, 0.5, 0.0]]])
+    i = np.arange(k)
+    j = (i + 1) % k
+    F = np.concatenate([np.stack([i, j, np.full(k, k)], 1), np.stack([j, i, np.full(k, k + 1)], 1)])
+    offs = [((o % 300) * 1.5, (o // 300) * 1.5) for o in range(n)]
+    if path.suffix == ".glb":
+        def edit(doc: dict) -> None:  # type: ignore[type-arg]
+            doc["nodes"] = [{"children": list(range(1, n + 1))}] + [
+                {"mesh": 0, "translation": [0.001 * x, 0.001 * y, 0.0]} for x, y in offs]
+            doc["scenes"] = [{"nodes": [0]}]
+        return hb.glb_with(path, edit, src=fx.write_glb(path.with_suffix(".src.glb"), V, F))
+    if path.suffix == ".wrl":
+        idx = ", ".join(f"{a}, {b}, {c}, -1" for a, b, c in F)
+        shapes = [
+            "Shape { geometry IndexedFaceSet { coord Coordinate { point [ "
+            + ", ".join(f"{x + ox:.4f} {y + oy:.4f} {z:.4f}" for x, y, z in V)
+            + f" ] }} coordIndex [ {idx} ] }} }}" for ox, oy in offs]
+        path.write_text("#VRML V2.0 utf8\n" + "\n".join(shapes) + "\n")
+        return path
+    tris = "".join(f'<triangle v1="{a}" v2="{b}" v3="{c}"/>' for a, b, c in F)
+    objs = "".join(
+        f'<object id="{o + 1}" type="model"><mesh><vertices>'
+        + "".join(f'<vertex x="{x + ox:.4f}" y="{y + oy:.4f}" z="{z:.4f}"/>' for x, y, z in V)
+        + f"</vertices><triangles>{tris}</triangles></mesh></object>" for o, (ox, oy) in enumerate(offs))
+    items = "".join(f'<item objectid="{o + 1}"/>' for o in range(n))
+    xml = (f'<?xml version="1.0" encoding="UTF-8"?><model unit="millimeter" xml:lang="en-US" xmlns="{fx.NS_CORE}">'
+           f"<resources>{objs}</resources><build>{items}</build></model>")
+    return fx.write_3mf(path, None, None, model=xml)  # type: ignore[arg-type]
 
 
 def warm_up(pythonpath: str | None) -> None:

@@ -134,7 +134,8 @@ class MeshBuilder:
                 f"{raise_hint(None if at_least else -(-nv // 3))}",
             )
         if self.parts + parts > self.limits.max_parts:
-            raise ReadError("over_check_limit", f"more than {self.limits.max_parts:,} mesh parts (Limits.max_parts)")
+            raise ReadError("over_check_limit", f"more than {self.limits.max_parts:,} mesh parts (Limits.max_parts); "
+                                                f"{raise_hint()}")
 
     def add(
         self,

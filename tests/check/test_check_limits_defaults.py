@@ -37,6 +37,7 @@ def test_defaults_keep_every_file_within_10_s_and_1_gib() -> None:
     assert lim.max_triangles == 500_000 and lim.max_vertices == 3 * lim.max_triangles
     assert lim.max_total_texture_pixels == lim.max_texture_pixels == 8192 * 8192
     assert lim.max_file_bytes == 256 << 20 and lim.max_texture_bytes == 128 << 20
+    assert lim.max_parts == 10_000
 
 
 def test_one_triangle_over_the_default_is_refused_from_the_header(tmp_path: Path) -> None:
@@ -139,3 +140,28 @@ def test_vrml_is_read_up_to_max_triangles(tmp_path: Path) -> None:
     assert len(read_mesh(p, Limits(max_triangles=len(F))).faces) == len(F)
     r = check_mesh(p, limits=Limits(max_triangles=len(F) - 1))
     assert r.exit_code == 2 and "Limits.max_triangles" in r.reason()
+
+
+def _objects_3mf(path: Path, n: int, instanced: bool = True) -> Path:
+    """A 3MF defining ``n`` box objects (two bulk blocks each), all built when ``instanced``, else only the first."""
+    V, F = fx.box((1.0, 1.0, 1.0))
+    verts = "".join(f'<vertex x="{x}" y="{y}" z="{z}"/>' for x, y, z in V)
+    tris = "".join(f'<triangle v1="{a}" v2="{b}" v3="{c}"/>' for a, b, c in F)
+    objs = "".join(f'<object id="{o + 1}" type="model"><mesh><vertices>{verts}</vertices><triangles>{tris}'
+                   "</triangles></mesh></object>" for o in range(n))
+    items = "".join(f'<item objectid="{o + 1}"/>' for o in range(n if instanced else 1))
+    xml = (f'<?xml version="1.0" encoding="UTF-8"?><model unit="millimeter" xml:lang="en-US" xmlns="{fx.NS_CORE}">'
+           f"<resources>{objs}</resources><build>{items}</build></model>")
+    return fx.write_3mf(path, None, None, model=xml)  # type: ignore[arg-type]
+
+
+def test_parts_are_bounded_and_3mf_blocks_with_them(tmp_path: Path) -> None:
+    """Each part costs its reader time of its own: parts instanced, and 3MF bulk blocks defined (3 per part)."""
+    lim = Limits(max_parts=10)
+    assert check_mesh(_objects_3mf(tmp_path / "ten.3mf", 10), limits=lim).exit_code != 2
+    r = check_mesh(_objects_3mf(tmp_path / "eleven.3mf", 11), limits=lim)
+    assert r.exit_code == 2 and "Limits.max_parts" in r.reason() and "--max-triangles" in r.reason()
+    # defined but never built: the blocks are parsed before anything is instanced, so they are counted too
+    r = check_mesh(_objects_3mf(tmp_path / "defined.3mf", 16, instanced=False), limits=lim)
+    assert r.exit_code == 2 and "blocks" in r.reason() and "Limits.max_parts" in r.reason(), r.reason()
+    assert Limits().for_triangles(10 * Limits().max_triangles).max_parts == 10 * Limits().max_parts

@@ -98,7 +98,7 @@ def read_mesh(path: str | os.PathLike[str], limits: Limits) -> MeshData:
             raise ReadError(
                 "over_check_limit",
                 f"the file is {size:,} bytes, over the checker's limit of {limits.max_file_bytes:,} "
-                f"(Limits.max_file_bytes); {raise_hint()}, and this limit in proportion",
+                f"(Limits.max_file_bytes); {raise_hint()}",
             )
     if fmt == "gzip":
         data = _gunzip(read_file_bounded(p, limits.max_file_bytes, "file"), limits)

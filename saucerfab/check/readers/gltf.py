@@ -151,7 +151,7 @@ class _Gltf(GltfData):
                 f"(a node listed by several parents counts once per listing), over the checker's limits "
                 f"({lim.max_triangles:,} triangles, Limits.max_triangles; {lim.max_vertices:,} "
                 f"vertices, Limits.max_vertices; {lim.max_parts:,} parts, Limits.max_parts)"
-                + (f"; {raise_hint(max(tri, -(-verts // 3)))}" if parts <= lim.max_parts else ""),
+                + f"; {raise_hint(max(tri, -(-verts // 3)) if parts <= lim.max_parts else None)}",
             )
         if visits > lim.max_node_visits:
             raise ReadError(

@@ -461,7 +461,7 @@ def read_3mf(data: bytes | SafeZip, limits: Limits) -> MeshData:
             f"the 3MF build instances {tri:,} triangles in {parts:,} mesh parts, over the checker's limits "
             f"({limits.max_triangles:,} triangles, Limits.max_triangles; {limits.max_vertices:,} vertices, "
             f"Limits.max_vertices; {limits.max_parts:,} parts, Limits.max_parts)"
-            + (f"; {raise_hint(max(tri, -(-vert // 3)))}" if parts <= limits.max_parts else ""),
+            + f"; {raise_hint(max(tri, -(-vert // 3)) if parts <= limits.max_parts else None)}",
         )
     for p, oid, M in items:
         r.instance(p, oid, M, 0)

@@ -103,6 +103,12 @@ def fast_blocks(data: bytes, marker_ns: str, limits: Limits) -> tuple[bytes, lis
             end = data.find(b"</" + prefix + b"texture2dgroup>", start)
         if end < 0:
             continue
+        if len(blocks) >= 3 * limits.max_parts:  # each costs its own Python and numpy calls (~0.1 ms)
+            raise ReadError(
+                "over_check_limit",
+                f"the 3MF model holds over {3 * limits.max_parts:,} vertex, triangle and texture-coordinate blocks "
+                f"(3 per part, Limits.max_parts); {raise_hint()}",
+            )
         content = data[start:end]
         if kind == "vertices":
             n_vert += content.count(b"<vertex")

@@ -551,7 +551,7 @@ def read_vrml(path: Path, data: bytes, limits: Limits, res: Resources | None = N
             "over_check_limit",
             f"the VRML scene instances about {tri:,} triangles in {shapes:,} shapes (DEF/USE), over the checker's "
             f"limits ({limits.max_triangles:,} triangles, Limits.max_triangles; {limits.max_parts:,} shapes, "
-            "Limits.max_parts)" + (f"; {raise_hint(tri)}" if shapes <= limits.max_parts else ""),
+            f"Limits.max_parts); {raise_hint(tri if shapes <= limits.max_parts else None)}",
         )
     if visits > limits.max_node_visits:
         raise ReadError(
