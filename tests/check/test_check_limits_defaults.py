@@ -165,3 +165,88 @@ def test_parts_are_bounded_and_3mf_blocks_with_them(tmp_path: Path) -> None:
     r = check_mesh(_objects_3mf(tmp_path / "defined.3mf", 16, instanced=False), limits=lim)
     assert r.exit_code == 2 and "blocks" in r.reason() and "Limits.max_parts" in r.reason(), r.reason()
     assert Limits().for_triangles(10 * Limits().max_triangles).max_parts == 10 * Limits().max_parts
+
+
+def _random_obj(rng: np.random.Generator, form: str, relative: bool, n_faces: int = 300, k: int = 0) -> bytes:
+    """An OBJ interleaving v / vt / vn lines and faces of 1 to 7 corners, indices absolute or relative."""
+    lines: list[str] = ["# random", "mtllib m.mtl"]
+    nv = nvt = 0
+    mats = ["a", "b", "c"]
+    for f in range(n_faces):
+        for _ in range(int(rng.integers(0, 4))):
+            lines.append(f"v {rng.random():.4f} {rng.random():.4f} {rng.random():.4f}")
+            nv += 1
+        for _ in range(int(rng.integers(0, 4))):
+            lines.append(f"vt {rng.random():.4f} {rng.random():.4f}")
+            nvt += 1
+        lines.append("vn 0 0 1")
+        if rng.random() < 0.1:
+            lines.append(f"usemtl {mats[int(rng.integers(0, 3))]}")
+        if nv == 0:
+            continue
+        corners = []
+        for _ in range(k or (int(rng.integers(1, 8)) if f else 3)):
+            v = int(rng.integers(1, nv + 1))
+            t = int(rng.integers(1, nvt + 3)) if nvt else 1  # now and then past the last vt: "missing"
+            if relative and rng.random() < 0.7:
+                v = v - nv - 1
+                t = t - nvt - 1 if t <= nvt else t  # (one past the last stays absolute: 0 is no index)
+            corners.append({"v": f"{v}", "v/t": f"{v}/{t}", "v/t/n": f"{v}/{t}/1", "v//n": f"{v}//1"}[form])
+        lines.append("f " + " ".join(corners))
+    for _ in range(3):
+        lines.append(f"v {rng.random():.4f} {rng.random():.4f} {rng.random():.4f}")  # defined after the faces
+    return ("\n".join(lines) + "\n").encode()
+
+
+@pytest.mark.parametrize("form", ["v", "v/t", "v/t/n", "v//n"])
+@pytest.mark.parametrize("relative", [False, True])
+def test_mixed_polygons_and_relative_indices_read_in_bulk_as_line_by_line(form: str, relative: bool) -> None:
+    """The numpy path for mixed polygon sizes and negative indices gives the line-by-line path's triangles."""
+    from saucerfab.check.readers import obj
+
+    for seed in range(6):
+        data = _random_obj(np.random.default_rng(seed), form, relative)
+        pay = [p for t, p in obj._F_OR_MTL.findall(data) if t == b"f"]
+        nv, nvt = len(obj._V.findall(data)), len(obj._VT.findall(data))
+        mats: list[bytes] = []
+        mat, cur = [], -1
+        for t, p in obj._F_OR_MTL.findall(data):
+            if t == b"usemtl":
+                if p.strip() not in mats:
+                    mats.append(p.strip())
+                cur = mats.index(p.strip())
+            else:
+                mat.append(cur)
+        want = obj._faces_slow(data, nv, nvt, Limits())
+        got = obj._faces_mixed(pay, np.array(mat, dtype=np.int64), nv, nvt, data, Limits(), form)
+        assert got is not None, (form, relative, seed)
+        for g, w in zip(got[:3], want[:3]):
+            np.testing.assert_array_equal(g, w)
+        assert got[3] == want[3]
+
+
+def test_a_relative_index_before_any_vertex_goes_to_the_line_by_line_path(tmp_path: Path) -> None:
+    p = tmp_path / "bad.obj"
+    p.write_bytes(b"v 0 0 0\nv 1 0 0\nf -1 -2 -3\nv 0 1 0\n")
+    r = check_mesh(p)
+    assert r.exit_code == 2 and r.codes == {"index_out_of_range"}, r.reason()
+    assert "OBJ face 0 refers to vertex -3" in r.reason()
+
+
+@pytest.mark.parametrize("form", ["v", "v/t", "v/t/n", "v//n"])
+def test_numba_parser_reads_relative_indices_as_the_reference(form: str) -> None:
+    """Uniform faces with relative indices (``f -3 -2 -1``, streaming writers) take the numba parser too."""
+    from saucerfab.check.readers import obj, obj_fast
+
+    for seed in range(4):
+        for k in (3, 4):
+            data = _random_obj(np.random.default_rng(seed), form, True, k=k)
+            nv, nvt = len(obj._V.findall(data)), len(obj._VT.findall(data))
+            want = obj._faces_slow(data, nv, nvt, Limits())
+            got = obj_fast.parse(data, Limits())
+            assert got is not None, (form, seed, k)
+            fv, ft, fmat, dropped = got[4], got[5], got[6], got[7]
+            np.testing.assert_array_equal(fv, want[0])
+            np.testing.assert_array_equal(ft, want[1])
+            np.testing.assert_array_equal(fmat, want[2])
+            assert dropped == want[3]
