@@ -315,6 +315,40 @@ def _padded(path: Path, kind: str) -> Path:
     return path
 
 
+def _obj_relative(path: Path) -> Path:
+    V, F, uv = _soup_at_limit()
+    (path.parent / "m.mtl").write_text("newmtl mat0\nKd 1 1 1\nmap_Kd texture.png\n")
+    (path.parent / "texture.png").write_bytes(fx.png_bytes(512, 512))
+    lines = ["mtllib m.mtl", "usemtl mat0"]
+    for t in range(len(F)):
+        for c in range(3):
+            x, y, z = V[3 * t + c]
+            u, v = uv[3 * t + c]
+            lines += [f"v {x:.6f} {y:.6f} {z:.6f}", f"vt {u:.6f} {v:.6f}", "vn 0 0 1"]
+        lines.append("f -3/-3/-3 -2/-2/-2 -1/-1/-1")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _obj_mixed(path: Path) -> Path:
+    V, F, _ = _soup_at_limit()
+    fx.write_obj(path, V, F[1:])
+    text = path.read_text()
+    i = text.index("\nf ")
+    path.write_text(text[:i] + "\nf 1 2 3 1" + text[i:])  # a quad (its second triangle degenerate)
+    return path
+
+
+def _3mf_tree(path: Path) -> Path:
+    import re
+
+    V, F, _ = _solid_at_limit()
+    xml = fx.model_xml(V, F)
+    xml = re.sub(r'<vertex x="([^"]*)" y="([^"]*)" z="([^"]*)"/>', r'<vertex z="\3" y="\2" x="\1"/>', xml)
+    xml = re.sub(r'<triangle v1="(\d+)" v2="(\d+)" v3="(\d+)"/>', r'<triangle v3="\3" v2="\2" v1="\1"/>', xml)
+    return fx.write_3mf(path, None, None, model=xml)  # type: ignore[arg-type]
+
+
 def _pile(path: Path) -> Path:
     """``max_triangles`` triangles of ~1 mm thrown into a 2 mm cube: every one crosses hundreds of others."""
     n = _limits().max_triangles
@@ -342,6 +376,12 @@ LARGE: list[tuple[str, str, Callable[[Path], Path]]] = [
      lambda d: _padded(d / "a.ply", "ply")),
     ("soup-obj-padded", "OBJ soup at max_triangles, comment lines up to max_file_bytes",
      lambda d: _padded(d / "a.obj", "obj")),
+    ("soup-obj-relative", "OBJ soup at max_triangles, v/vt/vn before each face 'f -3/-3/-3 -2/-2/-2 -1/-1/-1' "
+     "(relative indices, as streaming writers write)", lambda d: _obj_relative(d / "r.obj")),
+    ("soup-obj-mixed", "OBJ soup at max_triangles whose first face is a quad (faces of mixed sizes: not the "
+     "numba parser's uniform form)", lambda d: _obj_mixed(d / "q.obj")),
+    ("max-3mf-xml-tree", "3MF at max_triangles whose attributes are in another order (not the bulk grammar: "
+     "parsed element by element)", lambda d: _3mf_tree(d / "t.3mf")),
     ("pile-stl", "binary STL, max_triangles overlapping triangles in a 2 mm cube (self-intersection budget)",
      lambda d: _pile(d / "pile.stl")),
     *[(f"parts-{ext}", f"{ext.upper()}, max_parts {what} of max_triangles / max_parts triangles each",
