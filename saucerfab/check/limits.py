@@ -17,7 +17,7 @@ soup of 1.5 million vertices, in 3MF or VRML, with one 8192 x 8192 texture
 per million triangles on that machine (7.6 s PLY to 14.5 s 3MF per
 million), so a bigger file is refused from its header (``over_check_limit``,
 naming ``Limits.max_triangles``) and ``saucerfab check --max-triangles N``
-(or ``Limits.with_(max_triangles=N)``) raises the cap for a file one trusts,
+(``Limits().for_triangles(N)``) raises the cap for a file one trusts,
 at that price. A printer profile's own ``max_triangles`` (20 M for the J55)
 is what the printer takes, judged separately.
 
@@ -238,15 +238,17 @@ class Limits:
         does; ``texture_px`` (a square texture's edge) the pixel caps;
         ``file_bytes`` (the largest file, mesh or texture) the file and
         texture byte caps; ``inflated_bytes`` (the most an archive inflates
-        to) the archive caps.
+        to) the archive caps, and the file caps too (a zipped OBJ's entries
+        are checked as files).
         """
         lim = self.for_triangles(triangles) if triangles > self.max_triangles else self
         px = int(texture_px) ** 2
+        biggest = max(file_bytes, inflated_bytes)
         return replace(
             lim,
-            max_file_bytes=max(lim.max_file_bytes, file_bytes),
-            max_texture_bytes=max(lim.max_texture_bytes, file_bytes),
-            max_total_texture_bytes=max(lim.max_total_texture_bytes, file_bytes),
+            max_file_bytes=max(lim.max_file_bytes, biggest),
+            max_texture_bytes=max(lim.max_texture_bytes, biggest),
+            max_total_texture_bytes=max(lim.max_total_texture_bytes, biggest),
             max_texture_pixels=max(lim.max_texture_pixels, px),
             max_total_texture_pixels=max(lim.max_total_texture_pixels, px),
             max_uncompressed_bytes=max(lim.max_uncompressed_bytes, inflated_bytes),
