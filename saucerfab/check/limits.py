@@ -8,23 +8,25 @@ checked separately and give "not printable" findings, while a file over a
 checker limit is refused as unreadable (exit 2) with the limit's name in
 the message, so the user knows which knob to turn.
 
-The defaults hold every single file to at most 10 s and 1 GiB on a 2-core
-machine (issue 16; measured there, worst cases in
-``benchmarks/bench_check_hostile.py --large`` and the check README): the
-worst file within all of them together - 500,000 triangles as a triangle
-soup of 1.5 million vertices, in 3MF or VRML, with one 8192 x 8192 texture
-- takes about 6.5 s and 0.6 GB. An honest mesh costs about 1 GB and 15 s
-per million triangles on that machine (7.6 s PLY to 14.5 s 3MF per
-million), so a bigger file is refused from its header (``over_check_limit``,
-naming ``Limits.max_triangles``) and ``saucerfab check --max-triangles N``
-(``Limits().for_triangles(N)``) raises the cap for a file one trusts,
-at that price. A printer profile's own ``max_triangles`` (20 M for the J55)
-is what the printer takes, judged separately.
+The defaults hold every single file to at most 10 s and 1 GiB on the
+2-core development machine (issue 16): the worst file within all of them
+together - 500,000 triangles as a triangle soup of 1.5 million vertices
+with one 8192 x 8192 texture, or padded to 256 MiB, 10,000 parts - took at
+most 7.4 s and 823 MiB there with the machine otherwise idle
+(``benchmarks/bench_check_hostile.py --large``; the table per limit is in
+the check README). An honest mesh costs about 1 GB and 7-15 s per million
+triangles on that machine, so a bigger file is refused from its header
+(``over_check_limit``, naming ``Limits.max_triangles``), and ``saucerfab
+check --max-triangles N`` (``Limits().for_triangles(N)``) raises the caps
+for a file one trusts, at that price. A printer profile's own
+``max_triangles`` (20 M for the J55) is what the printer takes, judged
+separately.
 
-saucerfab's own exports are not a stranger's files: ``saucerfab export``
-and ``batch`` check them with these limits raised to what the export wrote
-(:func:`saucerfab.finish.export_limits`), so a design at the largest grid
-is never refused by a hostile-file budget.
+saucerfab's own exports are not a stranger's files: ``saucerfab export``,
+``batch``, ``verify`` and the print's report read them with these limits
+raised to what the export wrote (:func:`saucerfab.finish.export_limits`,
+:meth:`Limits.raised_to`), so a design at the largest grid is never refused
+by a hostile-file budget.
 
 Budgets against amplification (issue 16): what a file *makes* the checker
 do is bounded, not only what it holds - bytes inflated from an archive
