@@ -112,13 +112,51 @@ def meshes_to_check(files: Mapping[str, Sequence[Path]], scratch: Path | None = 
         yield out
 
 
-def check_mesh_file(path: Path, profile: Any) -> Any | None:
-    """``saucerfab.check.check_mesh(path, printer=profile)``, or None where the checker is absent."""
+def inflated_bytes(paths: Sequence[Path]) -> int:
+    """The most any of ``paths`` that is a zip (3MF, zipped OBJ) inflates to, by its own directory; 0 if none."""
+    most = 0
+    for p in paths:
+        try:
+            if zipfile.is_zipfile(p):
+                with zipfile.ZipFile(p) as zf:
+                    most = max(most, sum(i.file_size for i in zf.infolist()))
+        except (OSError, zipfile.BadZipFile):
+            continue  # the check itself will say what is wrong with it
+    return most
+
+
+def export_limits(result: Any) -> Any:
+    """The checker's limits for the files an export wrote: the defaults, raised to what the export holds.
+
+    The default :class:`~saucerfab.check.Limits` are budgets against a
+    stranger's hostile file (at most 10 s and 1 GiB per file, so 500,000
+    triangles and one 8192 x 8192 texture). These files are saucerfab's own,
+    written a moment ago from the design: a design at the largest grid
+    (``scene.MAX_GRID``) exports millions of triangles and a 16384 px atlas,
+    and the product must not refuse its own print as "too large to check".
+    So the triangle, vertex, byte and texture caps are raised to the
+    export's own sizes (never lowered); the checks then cost what a mesh of
+    that size costs (~1 GB and ~15 s per million triangles).
+    """
+    from saucerfab.check.limits import DEFAULT_LIMITS
+
+    paths = [Path(p) for ps in result.files.values() for p in ps]
+    sizes = [p.stat().st_size for p in paths if p.is_file()]
+    return DEFAULT_LIMITS.raised_to(
+        triangles=int(result.triangles),
+        texture_px=int(result.texture_px),
+        file_bytes=max(sizes, default=0),
+        inflated_bytes=inflated_bytes(paths),
+    )
+
+
+def check_mesh_file(path: Path, profile: Any, limits: Any = None) -> Any | None:
+    """``saucerfab.check.check_mesh(path, printer=profile, limits=limits)``, or None where the checker is absent."""
     try:
         from saucerfab.check import check_mesh
     except ImportError:
         return None
-    return check_mesh(path, printer=profile)
+    return check_mesh(path, printer=profile, limits=limits)
 
 
 def finish_print(
@@ -144,9 +182,15 @@ def finish_print(
     folder = Path(result.out)
     done = Finished()
     if check:
+        try:
+            # the product's own files: checked within limits raised to the export's sizes, not the
+            # hostile-file defaults (see export_limits)
+            limits = export_limits(result)
+        except ImportError:
+            limits = None  # no checker installed: check_mesh_file says so per file
         with meshes_to_check(result.files) as meshes:
             # reported by the file written: a zipped OBJ is named by its zip
-            done.checks += [(m.written, check_mesh_file(m.path, profile)) for m in meshes]
+            done.checks += [(m.written, check_mesh_file(m.path, profile, limits)) for m in meshes]
         docs = []
         for path, rep in done.checks:
             if rep is None:

@@ -290,6 +290,7 @@ def export_report(folder: str | Path) -> str:
     from saucerfab.verify.core import where_to_stand
     from saucerfab.verify.printfolder import (
         find_mesh_files,
+        folder_limits,
         load_print_scene,
         read_surface,
     )
@@ -339,7 +340,7 @@ def export_report(folder: str | Path) -> str:
     meshes = find_mesh_files(folder)
     if meshes:
         fmt, path = meshes[0]
-        surf = read_surface(path, fmt, scene)
+        surf = read_surface(path, fmt, scene, folder_limits(folder))  # the export's own sizes
         tex_id = int(np.max(surf.face_texture)) if surf.face_texture.size else -1
         texture = surf.textures[max(tex_id, 0)] if surf.textures else np.full((1, 1, 3), 200, np.uint8)
         sections.insert(1, _viewer_section(

@@ -340,7 +340,7 @@ def _collect(folder: Path, prefix: str) -> dict[str, bytes]:
 def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: list[str]) -> JobResult:
     from saucerfab.check import check_mesh
     from saucerfab.fabricate.pipeline import export_design
-    from saucerfab.finish import meshes_to_check
+    from saucerfab.finish import export_limits, meshes_to_check
 
     inp, out = work / "in", work / "out"
     for rel, data in payload.files.items():
@@ -405,10 +405,11 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
     checks: dict[str, Any] = {}
     reasons: list[str] = []
     written = {fmt: [Path(p) for p in result.files.get(fmt, [])] for fmt in payload.formats}
+    limits = export_limits(result)  # the job's own export: limits raised to its sizes, not a stranger's file's
     with meshes_to_check(written, scratch=work) as meshes:
         for mesh in meshes:
             rel = f"export/{mesh.name}"  # a zipped OBJ's entry: export/<zip>/<obj>
-            report = check_mesh(mesh.path, printer=payload.printer)
+            report = check_mesh(mesh.path, printer=payload.printer, limits=limits)
             d = report.to_dict()
             d["path"] = rel  # the path inside the job's folder, not the worker's scratch
             d.pop("elapsed_s", None)  # times go to the batch report; job files stay byte-identical

@@ -57,9 +57,43 @@ def self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndarr
         hit = exact(a, b)
         return np.stack([a[hit], b[hit]], axis=1)
 
-    found: list[np.ndarray] = []
+    # The crossing pairs are reduced chunk by chunk to what the finding says (their count, the faces
+    # they touch, the first pair in file order): a pile of overlapping triangles crosses itself tens of
+    # millions of times, and keeping every pair cost gigabytes and seconds of sorting.
+    n_pairs = 0
+    crossed = np.zeros(len(centroids), dtype=bool)
+    first: tuple[int, int] | None = None
+
+    def reduce(pairs: np.ndarray) -> None:
+        nonlocal n_pairs, first
+        if not len(pairs):
+            return
+        fp = np.sort(gidx[pairs], axis=1)  # file face indices, lower first
+        n_pairs += len(fp)
+        crossed[fp.ravel()] = True
+        k = np.lexsort((fp[:, 1], fp[:, 0]))[0]  # the first in file order, whatever order the search took
+        cand = (int(fp[k, 0]), int(fp[k, 1]))
+        if first is None or cand < first:
+            first = cand
+
+    # The exact tests are bounded too: at most a quarter of the node-pair budget (~25 candidate pairs per
+    # triangle; a sound mesh has ~8), past which the answer is partial.
+    tests_left = budget // 4
+    cut = False
+
+    def bounded(chunks: Iterable[tuple[np.ndarray, np.ndarray]]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        nonlocal tests_left, cut
+        for a, b in chunks:
+            if len(a) > tests_left:
+                a, b, cut = a[:tests_left], b[:tests_left], True
+            tests_left -= len(a)
+            if len(a):
+                yield a, b
+            if cut:
+                return
+
     workers = query_workers()
-    chunks = _rechunk(bvh.pair_chunks(tol=eps, budget=budget), _PAIR_CHUNK)
+    chunks = bounded(_rechunk(bvh.pair_chunks(tol=eps, budget=budget), _PAIR_CHUNK))
     if workers > 1 and m > 20_000:
         # numpy releases the GIL in its loops: the search (this thread) and the exact tests (the pool)
         # overlap, and a second core is used where there is one; a few chunks in flight bound memory
@@ -70,28 +104,26 @@ def self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndarr
             for a, b in chunks:
                 pending.append(ex.submit(narrow, a, b))
                 if len(pending) > 2 * workers:
-                    found.append(pending.pop(0).result())
-            found += [f.result() for f in pending]
+                    reduce(pending.pop(0).result())
+            for f in pending:
+                reduce(f.result())
     else:
-        found = [narrow(a, b) for a, b in chunks]
-    complete = bvh.pairs_complete
-    pairs = np.concatenate(found) if found else np.zeros((0, 2), dtype=np.int64)
-    stats["self_intersecting_pairs"] = len(pairs)
+        for a, b in chunks:
+            reduce(narrow(a, b))
+    complete = bvh.pairs_complete and not cut
+    stats["self_intersecting_pairs"] = n_pairs
     stats["self_intersection_check"] = "full" if complete else "partial"
     if not complete:
         out.append(finding("check_partial", "self-intersection search stopped at its work budget (Limits.max_pair_tests"
                                             f" = {limits.max_pair_tests:,}, scaled to the mesh): parts of the mesh "
                                             "crowd together so densely that not all pairs were compared"))
-    if len(pairs):
-        fp = np.sort(gidx[pairs], axis=1)  # file face indices, lower first
-        faces = np.unique(fp.ravel())
-        first = np.lexsort((fp[:, 1], fp[:, 0]))[0]  # the first in file order, whatever order the search took
-        f0, f1 = int(fp[first, 0]), int(fp[first, 1])
+    if first is not None:
+        f0, f1 = first
         out.append(finding(
             "self_intersections",
-            f"{len(pairs):,} pairs of faces cross each other ({len(faces):,} faces), first near "
+            f"{n_pairs:,} pairs of faces cross each other ({int(crossed.sum()):,} faces), first near "
             f"{fmt_pt(centroids[f0])}: faces {f0} and {f1}; union or repair the surfaces",
-            where=where(centroids[f0], [f0, f1], count=len(pairs)),
+            where=where(centroids[f0], [f0, f1], count=n_pairs),
         ))
 
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.check.limits import Limits
+from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.report import Finding, finding
 from saucerfab.errors import InputFileError
 
@@ -111,23 +111,31 @@ class MeshBuilder:
         self._noted: set[str] = set()
         self.parts = 0
 
-    def reserve(self, n_vertices: int, n_faces: int, what: str = "", *, parts: int = 1) -> None:
-        """Refuse (``over_check_limit``) before allocating ``parts`` more parts (of these sizes in all) over the caps."""
-        if self.nf + n_faces > self.limits.max_triangles:
+    def reserve(self, n_vertices: int, n_faces: int, what: str = "", *, parts: int = 1, at_least: bool = False) -> None:
+        """Refuse (``over_check_limit``) before allocating ``parts`` more parts (of these sizes in all) over the caps.
+
+        ``at_least``: the counts are lower bounds (a count that stopped once
+        past a cap), so the refusal does not repeat them as the option's value.
+        """
+        nf, nv = self.nf + n_faces, self.nv + n_vertices
+        some = "at least " if at_least else ""
+        if nf > self.limits.max_triangles:
             raise ReadError(
                 "over_check_limit",
-                f"{what or 'the file'} would bring the triangle count to {self.nf + n_faces:,}, over the "
-                f"checker's limit of {self.limits.max_triangles:,} (Limits.max_triangles; "
-                "--max-triangles raises it)",
+                f"{what or 'the file'} would bring the triangle count to {some}{nf:,}, over the "
+                f"checker's limit of {self.limits.max_triangles:,} (Limits.max_triangles); "
+                f"{raise_hint(None if at_least else nf)}",
             )
-        if self.nv + n_vertices > self.limits.max_vertices:
+        if nv > self.limits.max_vertices:
             raise ReadError(
                 "over_check_limit",
-                f"{what or 'the file'} would bring the vertex count to {self.nv + n_vertices:,}, over the "
-                f"checker's limit of {self.limits.max_vertices:,} (Limits.max_vertices)",
+                f"{what or 'the file'} would bring the vertex count to {some}{nv:,}, over the "
+                f"checker's limit of {self.limits.max_vertices:,} (Limits.max_vertices, 3 per allowed triangle); "
+                f"{raise_hint(None if at_least else -(-nv // 3))}",
             )
         if self.parts + parts > self.limits.max_parts:
-            raise ReadError("over_check_limit", f"more than {self.limits.max_parts:,} mesh parts (Limits.max_parts)")
+            raise ReadError("over_check_limit", f"more than {self.limits.max_parts:,} mesh parts (Limits.max_parts); "
+                                                f"{raise_hint()}")
 
     def add(
         self,

@@ -38,6 +38,7 @@ from saucerfab.verify.printfolder import (
     PrintScene,
     VerifyInputError,
     find_mesh_files,
+    folder_limits,
     load_print_scene,
     load_references,
     read_surface,
@@ -191,8 +192,9 @@ def verify_print(
     scores: list[FileScore] = []
     renders: dict[tuple[str, str], np.ndarray] = {}
     max_shift = round(MAX_SHIFT_FRACTION * res)
+    limits = folder_limits(folder)  # the export's own sizes, within what saucerfab exports
     for k, (fmt, path) in enumerate(files):
-        surface = read_surface(path, fmt, scene)
+        surface = read_surface(path, fmt, scene, limits)
         tracer = PrintTracer(surface, scene.cup)
         fs = FileScore(path, fmt)
         for eye in all_eyes if k == 0 else all_eyes[:1]:

@@ -29,6 +29,7 @@ from saucerfab.design import reference_name
 from saucerfab.cups import CUP_CLASSES, Cup, cup_from_dict
 from saucerfab.errors import ConfigError, InputFileError
 from saucerfab.formats import TABLE
+from saucerfab.scene import MAX_GRID
 
 #: largest scene.json read (a real one is about 1.5 kB)
 MAX_SCENE_JSON_BYTES = 1 << 20
@@ -278,8 +279,55 @@ def top_faces(vertices: np.ndarray, faces: np.ndarray, scene: PrintScene) -> np.
     return inside & (nz > 1e-6)
 
 
-def read_surface(path: Path, fmt: str, scene: PrintScene) -> PrintedSurface:
+#: the most triangles saucerfab's own export holds (a design at ``scene.MAX_GRID``: two triangles a grid cell on
+#: top, as many again at most for the base, walls and seat); see :func:`folder_limits`
+MAX_OWN_TRIANGLES = 4 * MAX_GRID**2
+#: the most bytes :func:`folder_limits` trusts a folder's files to need (file, texture, inflated archive)
+MAX_OWN_BYTES = 4 << 30
+
+
+def folder_limits(folder: Path) -> Any:
+    """The checker's limits for reading ``folder``'s meshes: the defaults, raised to the folder's own export.
+
+    The defaults bound a stranger's file to 500,000 triangles and one
+    8192 x 8192 texture; an export of a design at the largest grid holds
+    millions of triangles and up to a 16384 px atlas, and verify must read
+    it. So the limits are raised to the triangle count and atlas size its
+    ``export.json`` states, and to its files' sizes on disk - but never past
+    what saucerfab's own export can hold (:data:`MAX_OWN_TRIANGLES`,
+    ``fabricate.options.MAX_TEXTURE_PX``, :data:`MAX_OWN_BYTES`), since the
+    folder may come from elsewhere. A folder without a readable summary
+    gets the defaults.
+    """
+    from saucerfab.check.limits import DEFAULT_LIMITS
+    from saucerfab.fabricate.options import MAX_TEXTURE_PX
+    from saucerfab.finish import inflated_bytes
+
+    lim = DEFAULT_LIMITS.with_(keep_texture_pixels=True)
+    try:
+        path = folder / "export.json"
+        if path.stat().st_size > MAX_SCENE_JSON_BYTES:
+            return lim
+        d = json.loads(path.read_bytes().decode("utf-8"))
+        tri, px = d["triangles"], d["texture_px"]
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError, KeyError, TypeError):
+        return lim
+    if not (isinstance(tri, int) and isinstance(px, int)):
+        return lim
+    files = [p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")]
+    return lim.raised_to(
+        triangles=min(max(tri, 0), MAX_OWN_TRIANGLES),
+        texture_px=min(max(px, 0), MAX_TEXTURE_PX),
+        file_bytes=min(max((p.stat().st_size for p in files), default=0), MAX_OWN_BYTES),
+        inflated_bytes=min(inflated_bytes([p for p in files if p.suffix.lower() in (".3mf", ".zip")]), MAX_OWN_BYTES),
+    )
+
+
+def read_surface(path: Path, fmt: str, scene: PrintScene, limits: Any = None) -> PrintedSurface:
     """Read one exported mesh file with its textures (bounded, as the checker reads).
+
+    ``limits``: the checker's limits to read it with (:func:`folder_limits`;
+    default: the checker's defaults).
 
     Raises:
         VerifyInputError: unreadable, no texture, or a texture that cannot be decoded.
@@ -288,8 +336,10 @@ def read_surface(path: Path, fmt: str, scene: PrintScene) -> PrintedSurface:
     from saucerfab.check.meshdata import ReadError
     from saucerfab.check.readers import read_mesh
 
+    if limits is None:
+        limits = DEFAULT_LIMITS
     try:
-        md = read_mesh(path, DEFAULT_LIMITS.with_(keep_texture_pixels=True))
+        md = read_mesh(path, limits.with_(keep_texture_pixels=True))
     except ReadError as exc:
         raise VerifyInputError(f"{path.name}: cannot be read ({exc.code}): {exc.message}") from None
     if md.corner_uv is None or md.face_texture is None or not md.textures:

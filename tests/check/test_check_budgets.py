@@ -373,7 +373,7 @@ def test_inflation_ratio_leaves_ordinary_archives_alone(tmp_path: Path) -> None:
 
 
 def test_texture_pixels_have_one_budget_per_file(tmp_path: Path) -> None:
-    """Three textures claiming 8192 x 8192 each (the per-texture maximum): the third is over the file's budget."""
+    """Three textures claiming 8192 x 8192 each (the per-texture maximum): past the file's budget (one such image)."""
     p = zipped_obj_with_textures(tmp_path / "textures.zip", [png_claiming(8192, 8192)] * 3)
     r = check_mesh(p)
     refused(r, "texture_too_large", "Limits.max_total_texture_pixels")

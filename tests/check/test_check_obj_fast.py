@@ -163,7 +163,10 @@ def test_other_files_fall_back_or_agree(tmp_path, monkeypatch, fast_hits, data) 
 
 
 def test_what_falls_back(tmp_path, monkeypatch, fast_hits) -> None:
-    assert not _both(tmp_path, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n", monkeypatch, fast_hits)
+    # relative indices are read by the numba parser too (issue 16: 11 s for a 500,000-triangle soup before)
+    assert _both(tmp_path, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n", monkeypatch, fast_hits)
+    assert not _both(tmp_path, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -4\n", monkeypatch, fast_hits)  # before the first
+    assert not _both(tmp_path, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -0 1 2\n", monkeypatch, fast_hits)
     assert not _both(tmp_path, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 1 2 3 4\n", monkeypatch, fast_hits)
     assert not _both(tmp_path, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 5\n", monkeypatch, fast_hits)
 

@@ -19,7 +19,7 @@ import os
 import zlib
 from pathlib import Path
 
-from saucerfab.check.limits import Limits
+from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import MeshData, ReadError
 from saucerfab.check.readers.safe import Resources
 from saucerfab.check.report import finding
@@ -85,16 +85,21 @@ def read_mesh(path: str | os.PathLike[str], limits: Limits) -> MeshData:
         raise ReadError("file_not_found", f"cannot open {os.fspath(p)!r}: {exc.strerror or exc}") from None
     if size == 0:
         raise ReadError("empty_file", "the file is empty (0 bytes)")
-    if size > limits.max_file_bytes:
-        raise ReadError(
-            "over_check_limit",
-            f"the file is {size:,} bytes, over the checker's limit of {limits.max_file_bytes:,} (Limits.max_file_bytes)",
-        )
     with open(p, "rb") as fh:
         head = fh.read(4096)
     name = p.name.lower()
     ext = EXTENSIONS.get(Path(name[:-3] if name.endswith(".gz") else name).suffix, "")
     fmt = sniff(head, size, ext)
+    if size > limits.max_file_bytes:
+        from saucerfab.check.readers.stl import binary_count, looks_binary
+
+        # a binary STL is read by its header's count, not whole: its reader refuses it naming that count
+        if not (fmt == "stl" and looks_binary(head, size) and (binary_count(head) or 0) > limits.max_triangles):
+            raise ReadError(
+                "over_check_limit",
+                f"the file is {size:,} bytes, over the checker's limit of {limits.max_file_bytes:,} "
+                f"(Limits.max_file_bytes); {raise_hint()}",
+            )
     if fmt == "gzip":
         data = _gunzip(read_file_bounded(p, limits.max_file_bytes, "file"), limits)
         if not data.startswith(b"#VRML"):

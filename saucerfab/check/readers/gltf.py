@@ -52,7 +52,7 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.check.limits import Limits
+from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
 from saucerfab.check.readers.gltf_data import (
     _COMPONENT,
@@ -149,8 +149,9 @@ class _Gltf(GltfData):
                 "over_check_limit",
                 f"the glTF scene instances {tri:,} triangles ({verts:,} vertices) in {parts:,} primitive instances "
                 f"(a node listed by several parents counts once per listing), over the checker's limits "
-                f"({lim.max_triangles:,} triangles, Limits.max_triangles / --max-triangles; {lim.max_vertices:,} "
-                f"vertices, Limits.max_vertices; {lim.max_parts:,} parts, Limits.max_parts)",
+                f"({lim.max_triangles:,} triangles, Limits.max_triangles; {lim.max_vertices:,} "
+                f"vertices, Limits.max_vertices; {lim.max_parts:,} parts, Limits.max_parts)"
+                + f"; {raise_hint(max(tri, -(-verts // 3)) if parts <= lim.max_parts else None)}",
             )
         if visits > lim.max_node_visits:
             raise ReadError(

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.check.limits import Limits
+from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import ReadError
 from saucerfab.check.readers.safe import Resources
 
@@ -242,7 +242,8 @@ class GltfData:
         if count_must is not None and count != count_must:
             raise _bad(f"accessor {i} ({what}) has {count:,} entries for {count_must:,} positions")
         if count > self.limits.max_vertices + 3 * self.limits.max_triangles:
-            raise ReadError("over_check_limit", f"glTF accessor {i} has {count:,} elements, over the checker's limits")
+            raise ReadError("over_check_limit", f"glTF accessor {i} has {count:,} elements, over the checker's limits "
+                                                f"(Limits.max_vertices + 3 x Limits.max_triangles); {raise_hint()}")
         normalized = acc.get("normalized", False)
         if not isinstance(normalized, bool):
             raise _bad(f"accessor {i}: 'normalized' is not a boolean")

@@ -3,11 +3,11 @@
 Statement lines are counted before any list of them is made, exactly as the
 parser will match them (any run of blanks may lead a line), so a file of a
 billion ``v`` lines is refused by its count, not by running out of memory.
-The common layouts (every ``f`` a triangle with the same ``a/b/c`` form,
-positive indices) are read in bulk with numpy; anything else (polygons,
-negative indices, mixed forms, comments) takes a line-by-line path, which
-range-checks each index as it reads it (0 is not an OBJ index). Polygons
-are fan-triangulated in order.
+The common layouts (every ``f`` with the same ``a/b/c`` form: triangles,
+quads or polygons of mixed sizes, positive or relative indices) are read in
+bulk with numpy; anything else (mixed forms, comments after faces, an index
+out of range) takes a line-by-line path, which range-checks each index as
+it reads it (0 is not an OBJ index). Polygons are fan-triangulated in order.
 
 Colour: ``map_Kd`` textures through ``vt`` coordinates, ``Kd`` material
 colours, and the common ``v x y z r g b`` vertex-colour extension. The MTL
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from saucerfab.check.limits import Limits
+from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
 from saucerfab.check.readers.safe import DiskResources, Resources
 
@@ -199,9 +199,10 @@ def _parse(data: bytes, limits: Limits, b: MeshBuilder
     """The reference parse: (V, vertex colours or None, UV, material names, fv, ft, fmat, triangles missing UVs)."""
     counts = _count_statements(data, {b"v": limits.max_vertices, b"vt": limits.max_vertices, b"f": limits.max_triangles})
     nv, nvt, nf = counts[b"v"], counts[b"vt"], counts[b"f"]
-    b.reserve(nv, nf, "the OBJ")
+    b.reserve(nv, nf, "the OBJ", at_least=True)  # the counts stop once past a cap
     if nvt > limits.max_vertices:
-        raise ReadError("over_check_limit", f"the OBJ has {nvt:,} 'vt' lines, over Limits.max_vertices")
+        raise ReadError("over_check_limit", f"the OBJ has over {limits.max_vertices:,} 'vt' lines "
+                                            f"(Limits.max_vertices); {raise_hint()}")
     v_pay = _V.findall(data)
     vt_pay = _VT.findall(data)
     fm = _F_OR_MTL.findall(data)
@@ -278,7 +279,106 @@ def _faces(
                 _check_range(ft, 1 << 62, "texture coordinate")  # only an index of 0 (-1 here): no OBJ index
             ft, dropped = _drop_missing_uv(ft, nvt)
             return fv, ft, np.repeat(mat, k - 2), dropped
+    if form is not None and (got := _faces_mixed(pay, mat, nv, nvt, data, limits, form)) is not None:
+        return got
     return _faces_slow(data, nv, nvt, limits)
+
+
+def _faces_mixed(pay: list[bytes], mat: np.ndarray, nv: int, nvt: int, data: bytes, limits: Limits, form: str
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
+    """The bulk path for polygons of mixed sizes and relative (negative) indices; None: the line-by-line path.
+
+    Every face must use ``form`` (the first face's index form) for every
+    corner. The result is :func:`_faces_slow`'s, in numpy: Blender writes
+    triangles and quads mixed, streaming writers write ``f -3 -2 -1``, and
+    the line-by-line path takes ~3 us a corner (a 500,000-triangle soup
+    with relative indices: 11 s). Anything the line-by-line path would
+    refuse (index 0, out of range, too large) goes back to it, so its
+    messages stay the file's.
+    """
+    tok = _FACE_FORMS[form]
+    # line by line: one pattern over all the lines, with a repeat inside a repeat, keeps a backtracking
+    # record per corner (~500 MB for 1.5 million corners)
+    line = re.compile(rb"[ \t]*" + tok + rb"(?:[ \t]+" + tok + rb")*[ \t]*")
+    if not all(line.fullmatch(p) for p in pay):
+        return None
+    joined = b"\n".join(pay)
+    per = {"v": 1, "v/t": 2, "v/t/n": 3, "v//n": 2}[form]
+    a = np.frombuffer(joined, np.uint8)
+    solid = (a != 32) & (a != 9) & (a != 10)
+    word = np.flatnonzero(solid & ~np.concatenate([[False], solid[:-1]]))  # where each corner starts
+    k = np.bincount(np.cumsum(a == 10)[word], minlength=len(pay))  # corners per face (line)
+    try:
+        # parsed in C, no Python object per number (the grammar above admits only integers; one too large for
+        # an int64 saturates, and is then out of range: the line-by-line path refuses it by name)
+        nums = np.fromstring(joined.replace(b"//", b" ").replace(b"/", b" "), dtype=np.int64, sep=" ")
+        nums = nums.reshape(-1, per)
+    except ValueError:
+        return None
+    textured = form in ("v/t", "v/t/n")
+    used = nums[:, :2] if textured else nums[:, :1]  # normals are not read (the line-by-line path ignores them)
+    if len(nums) != int(k.sum()) or (used == 0).any():
+        return None
+    vi = nums[:, 0]
+    ti = nums[:, 1] if textured else None
+    if (used < 0).any():  # relative: counted back from the last v (vt) defined before the face's line
+        before = _defined_before_faces(data, len(pay), 4 * (nv + nvt + len(pay)) + 16)
+        if before is None:
+            return None
+        corner_face = np.repeat(np.arange(len(pay)), k)
+        vj = np.where(vi > 0, vi - 1, before[0][corner_face] + vi)
+        tj = None if ti is None else np.where(ti > 0, ti - 1, before[1][corner_face] + ti)
+    else:
+        vj = vi - 1
+        tj = None if ti is None else ti - 1
+    if ((vj < 0) | (vj >= nv)).any():
+        return None
+    ntri = np.maximum(k - 2, 0)
+    total = int(ntri.sum())
+    if total > limits.max_triangles:
+        raise ReadError("over_check_limit", f"the OBJ's polygons make over {limits.max_triangles:,} triangles "
+                                            f"(Limits.max_triangles); {raise_hint(total)}")
+    first = np.cumsum(k) - k  # each face's first corner
+    tri_face = np.repeat(np.arange(len(pay)), ntri)
+    j = np.arange(total, dtype=np.int64) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1
+    c0 = first[tri_face]
+    fan = (c0, c0 + j, c0 + j + 1)  # (0, j, j+1) of each face
+    fv = np.stack([vj[c] for c in fan], axis=1)
+    if tj is None:
+        ft = np.full(fv.shape, -1, dtype=np.int64)
+    else:
+        tj = np.where((tj >= 0) & (tj < nvt), tj, nvt)  # nvt: a coordinate the file lacks ("missing")
+        ft = np.stack([tj[c] for c in fan], axis=1)
+    ft, dropped = _drop_missing_uv(ft, nvt)
+    return fv, ft, np.repeat(mat, ntri), dropped
+
+
+def _defined_before_faces(data: bytes, n_faces: int, max_lines: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """For each ``f`` line in order, how many ``v`` and ``vt`` lines precede it; None where it cannot say cheaply.
+
+    Lines are told apart by their first bytes, as the parser's patterns
+    match them when no line starts with a blank (otherwise None), and only
+    for files of at most ``max_lines`` lines (each costs 8 bytes here).
+    """
+    if b"\n " in data or b"\n\t" in data or data[:1] in (b" ", b"\t") or data.count(b"\n") > max_lines:
+        return None
+    a = np.frombuffer(data, np.uint8)
+    n = len(a)
+    starts = np.concatenate([[0], np.flatnonzero(a == 10) + 1])
+    starts = starts[starts < n]
+
+    def at(off: int) -> np.ndarray:
+        i = starts + off
+        return np.where(i < n, a[np.minimum(i, n - 1)], 10)
+
+    c0, c1, c2 = at(0), at(1), at(2)
+    blank1 = (c1 == 32) | (c1 == 9)
+    is_v = (c0 == ord("v")) & blank1
+    is_vt = (c0 == ord("v")) & (c1 == ord("t")) & ((c2 == 32) | (c2 == 9))
+    is_f = (c0 == ord("f")) & blank1
+    if int(is_f.sum()) != n_faces:
+        return None
+    return (np.cumsum(is_v) - is_v)[is_f], (np.cumsum(is_vt) - is_vt)[is_f]
 
 
 def _drop_missing_uv(ft: np.ndarray, nvt: int) -> tuple[np.ndarray, int]:
@@ -382,7 +482,7 @@ def _faces_slow(data: bytes, nv_total: int, nvt_total: int, limits: Limits
         nface += 1
         if len(fv) > limits.max_triangles:
             raise ReadError("over_check_limit", f"the OBJ's polygons make over {limits.max_triangles:,} triangles "
-                                                "(Limits.max_triangles; --max-triangles raises it)")
+                                                f"(Limits.max_triangles); {raise_hint()}")
     fva = np.array(fv, dtype=np.int64).reshape(-1, 3)
     fta = np.array(ft, dtype=np.int64).reshape(-1, 3)
     _check_range(fva, nv_total, "vertex")

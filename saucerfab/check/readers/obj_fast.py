@@ -8,8 +8,8 @@ in two passes over the bytes (count, then fill):
 - ``v x y z [w | r g b [a]]`` (3 to 7 numbers) and ``vt u v [w]`` (2 or 3),
   numbers separated by blanks, optional trailing blanks;
 - ``f`` lines that all have the first face's corner count (3..16) and index
-  form (``v``, ``v/t``, ``v/t/n``, ``v//n``), positive indices only: the
-  reference's bulk form;
+  form (``v``, ``v/t``, ``v/t/n``, ``v//n``), indices positive or relative
+  (``-1``: the last defined so far, as streaming writers write them);
 - ``usemtl`` and ``mtllib`` payloads (their positions), and whether any
   ``l p curv surf curv2`` statement is present (the ``ignored_content`` note).
 
@@ -250,6 +250,8 @@ def fill(a: np.ndarray, cls: np.ndarray, pow10: np.ndarray, V: np.ndarray, UV: n
     dropped = 0
     cur = -1
     idx = np.zeros(48, dtype=np.int64)
+    rv = np.zeros(16, dtype=np.int64)
+    rt = np.zeros(16, dtype=np.int64)
     i = 0
     while i < n:
         kind, j = _keyword(a, i, n)
@@ -313,6 +315,9 @@ def fill(a: np.ndarray, cls: np.ndarray, pow10: np.ndarray, V: np.ndarray, UV: n
                             if p >= n or a[p] != 47:
                                 return 2, all6, dropped, hard[:nh]
                             p += 1
+                    neg = p < n and a[p] == 45  # a relative index: counted back from the last defined
+                    if neg:
+                        p += 1
                     x = 0
                     s = p
                     while p < n and 48 <= a[p] <= 57:
@@ -323,34 +328,40 @@ def fill(a: np.ndarray, cls: np.ndarray, pow10: np.ndarray, V: np.ndarray, UV: n
                         return 2, all6, dropped, hard[:nh]
                     if x >= (1 << 56):  # the reference's int64 may overflow: its line-by-line path decides
                         return 3, all6, dropped, hard[:nh]
-                    idx[c * per + q] = x
+                    idx[c * per + q] = -x if neg else x
             while p < n and _is_blank(a[p]):
                 p += 1
             if p < n and a[p] != 10 and a[p] != 13:
                 return 2, all6, dropped, hard[:nh]
-            for c in range(k):
+            for c in range(k):  # 0-based: vertices in rv, texture coordinates in rt (-1: one the file lacks)
                 x = idx[c * per]
-                if x == 0 or x > nv:
+                r = x - 1 if x > 0 else iv + x
+                if x == 0 or x > nv or r < 0:
                     return 3, all6, dropped, hard[:nh]
-                if per >= 2 and not slash2 and idx[c * per + 1] == 0:
-                    return 3, all6, dropped, hard[:nh]
-            for c in range(1, k - 1):
-                fv[itri, 0] = idx[0] - 1
-                fv[itri, 1] = idx[c * per] - 1
-                fv[itri, 2] = idx[(c + 1) * per] - 1
+                rv[c] = r
                 if per >= 2 and not slash2:
-                    t0 = idx[1]
-                    t1 = idx[c * per + 1]
-                    t2 = idx[(c + 1) * per + 1]
-                    if t0 > nvt or t1 > nvt or t2 > nvt:
+                    t = idx[c * per + 1]
+                    if t == 0:
+                        return 3, all6, dropped, hard[:nh]
+                    r = t - 1 if t > 0 else ivt + t
+                    rt[c] = r if 0 <= r < nvt else -1
+            for c in range(1, k - 1):
+                fv[itri, 0] = rv[0]
+                fv[itri, 1] = rv[c]
+                fv[itri, 2] = rv[c + 1]
+                if per >= 2 and not slash2:
+                    t0 = rt[0]
+                    t1 = rt[c]
+                    t2 = rt[c + 1]
+                    if t0 < 0 or t1 < 0 or t2 < 0:
                         ft[itri, 0] = -1
                         ft[itri, 1] = -1
                         ft[itri, 2] = -1
                         dropped += 1
                     else:
-                        ft[itri, 0] = t0 - 1
-                        ft[itri, 1] = t1 - 1
-                        ft[itri, 2] = t2 - 1
+                        ft[itri, 0] = t0
+                        ft[itri, 1] = t1
+                        ft[itri, 2] = t2
                 else:
                     ft[itri, 0] = -1
                     ft[itri, 1] = -1

@@ -15,6 +15,9 @@ corner (MeshLab's ``texcoord`` list), with the texture named by a
 
 from __future__ import annotations
 
+import io
+import itertools
+
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -120,7 +123,7 @@ def read_ply(path: Path, data: bytes, limits: Limits, res: Resources | None = No
             b.reserve(e.count, 0, "the PLY vertex element")
         elif e.name == "face":
             b.reserve(0, e.count, "the PLY face element")
-    parsed = _read_ascii(bytes(body), elements) if fmt == "ascii" else _read_binary(body, elements, fmt)
+    parsed = _read_ascii(data, start, elements) if fmt == "ascii" else _read_binary(body, elements, fmt)
     return _assemble(res, parsed, elements, comments, b)
 
 
@@ -195,9 +198,13 @@ def _binary_lists(body: memoryview, off: int, e: _Element, endian: str) -> tuple
     return {k: v for k, v in lists.items()}, pos
 
 
-def _read_ascii(body: bytes, elements: list[_Element]) -> dict[str, dict[str, np.ndarray | list]]:
+def _read_ascii(data: bytes, start: int, elements: list[_Element]) -> dict[str, dict[str, np.ndarray | list]]:
     total = sum(e.count for e in elements)
-    lines = [ln for ln in body.split(b"\n", total)[:total] if ln.strip()]
+    # the first ``total`` lines after the header, read in place: a copy of the body, or the split's last
+    # piece (everything after them), would hold up to the whole file twice more (issue 16)
+    src = io.BytesIO(data)  # shares ``data``'s buffer
+    src.seek(start)
+    lines = [ln for ln in itertools.islice(src, total) if ln.strip()]
     if len(lines) < total:
         raise ReadError("truncated", f"the PLY body has {len(lines):,} records of the {total:,} its header declares")
     out: dict[str, dict[str, np.ndarray | list]] = {}

@@ -21,6 +21,9 @@ from saucerfab.check.readers.safe import read_file_bounded
 
 _BIN_DTYPE = np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
 _NUM = rb"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?|[-+]?(?:nan|inf|infinity)"
+_SOLID = re.compile(rb"\s*solid", re.IGNORECASE)
+#: bytes lowered at a time to count keywords
+_COUNT_SLICE = 16 << 20
 _VERTEX = re.compile(rb"vertex[ \t]+(" + _NUM + rb")[ \t]+(" + _NUM + rb")[ \t]+(" + _NUM + rb")", re.IGNORECASE)
 
 
@@ -70,12 +73,30 @@ def read_stl(path: Path, head: bytes, size: int, limits: Limits, data: bytes | N
     return _read_ascii(data, b, limits)
 
 
+def _count_words(data: bytes, words: tuple[bytes, ...]) -> list[int]:
+    """Case-insensitive counts of ``words`` (no newline in them) in ``data``, lowering 16 MiB at a time.
+
+    ``data.lower()`` whole would hold a second copy of the file (up to
+    ``Limits.max_file_bytes``) for as long as the read takes.
+    """
+    counts = [0] * len(words)
+    pos = 0
+    while pos < len(data):
+        end = data.rfind(b"\n", pos, pos + _COUNT_SLICE) + 1 if pos + _COUNT_SLICE < len(data) else len(data)
+        if end <= pos:  # a line longer than a slice: a word may straddle; count up to the next newline
+            nl = data.find(b"\n", pos + _COUNT_SLICE)
+            end = len(data) if nl < 0 else nl + 1
+        piece = data[pos:end].lower()
+        for i, w in enumerate(words):
+            counts[i] += piece.count(w)
+        pos = end
+    return counts
+
+
 def _read_ascii(data: bytes, b: MeshBuilder, limits: Limits) -> MeshData:
-    low = data.lower()
-    if not low.lstrip().startswith(b"solid"):
+    if not _SOLID.match(data):
         raise ReadError("malformed", "neither a binary STL (size does not match its count) nor an ASCII one ('solid')")
-    n_vertex = low.count(b"vertex")
-    n_facet = low.count(b"endfacet")
+    n_vertex, n_facet = _count_words(data, (b"vertex", b"endfacet"))
     b.reserve(n_vertex, n_vertex // 3, "the ASCII STL")
     if n_facet == 0:
         raise ReadError("no_triangles", "the ASCII STL has no facets")
@@ -86,7 +107,7 @@ def _read_ascii(data: bytes, b: MeshBuilder, limits: Limits) -> MeshData:
             f"ASCII STL has {n_facet:,} facets but {len(vals):,} readable vertex lines of {n_vertex:,} "
             "(each facet needs exactly 3 'vertex x y z')",
         )
-    if b"endsolid" not in low[-1024:]:
+    if b"endsolid" not in data[-1024:].lower():
         raise ReadError("truncated", "the ASCII STL ends without 'endsolid'")
     V = np.array(vals, dtype=np.float64)
     b.add(V, np.arange(len(V), dtype=np.int64).reshape(-1, 3), what="STL")

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.check.limits import Limits
+from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
 from saucerfab.check.readers.safe import (
     SafeZip,
@@ -459,8 +459,9 @@ def read_3mf(data: bytes | SafeZip, limits: Limits) -> MeshData:
         raise ReadError(
             "over_check_limit",
             f"the 3MF build instances {tri:,} triangles in {parts:,} mesh parts, over the checker's limits "
-            f"({limits.max_triangles:,} triangles, Limits.max_triangles / --max-triangles; "
-            f"{limits.max_parts:,} parts, Limits.max_parts)",
+            f"({limits.max_triangles:,} triangles, Limits.max_triangles; {limits.max_vertices:,} vertices, "
+            f"Limits.max_vertices; {limits.max_parts:,} parts, Limits.max_parts)"
+            + f"; {raise_hint(max(tri, -(-vert // 3)) if parts <= limits.max_parts else None)}",
         )
     for p, oid, M in items:
         r.instance(p, oid, M, 0)

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.check.limits import Limits
+from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import ReadError
 from saucerfab.check.readers.threemf_grammar import ATTR, END, TRI_ATTR_ORDER, WS, element_res
 
@@ -89,7 +89,7 @@ def fast_blocks(data: bytes, marker_ns: str, limits: Limits) -> tuple[bytes, lis
     pieces: list[bytes] = []
     blocks: list[Block] = []
     pos = 0
-    n_vert = n_tri = 0
+    n_vert = n_uv = n_tri = 0
     at = 0
     fast = _use_fast(len(data))
     while (m := _BLOCK_START.search(data, at)) is not None:  # from the last block's end: blocks are not rescanned
@@ -103,19 +103,25 @@ def fast_blocks(data: bytes, marker_ns: str, limits: Limits) -> tuple[bytes, lis
             end = data.find(b"</" + prefix + b"texture2dgroup>", start)
         if end < 0:
             continue
+        if len(blocks) >= 3 * limits.max_parts:  # each costs its own Python and numpy calls (~0.1 ms)
+            raise ReadError(
+                "over_check_limit",
+                f"the 3MF model holds over {3 * limits.max_parts:,} vertex, triangle and texture-coordinate blocks "
+                f"(3 per part, Limits.max_parts); {raise_hint()}",
+            )
         content = data[start:end]
         if kind == "vertices":
             n_vert += content.count(b"<vertex")
         elif kind == "triangles":
             n_tri += content.count(b"<triangle")
         else:
-            n_vert += content.count(b"tex2coord")
-        if n_vert > limits.max_vertices or n_tri > limits.max_triangles:
+            n_uv += content.count(b"tex2coord")
+        if max(n_vert, n_uv) > limits.max_vertices or n_tri > limits.max_triangles:
             raise ReadError(
                 "over_check_limit",
-                f"the 3MF model lists over {limits.max_vertices:,} vertices/coordinates or "
+                f"the 3MF model lists over {limits.max_vertices:,} vertices (or texture coordinates) or "
                 f"{limits.max_triangles:,} triangles, the checker's limits (Limits.max_vertices, "
-                "Limits.max_triangles; --max-triangles raises the latter)",
+                f"Limits.max_triangles); {raise_hint(max(n_tri, -(-max(n_vert, n_uv) // 3)))}",
             )
         parsed = _parse_block(kind, content, m.group(2) or b"", fast)
         if parsed is None:

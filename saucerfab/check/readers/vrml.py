@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.check.limits import Limits
+from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
 from saucerfab.check.readers.safe import DiskResources, Resources
 
@@ -263,7 +263,7 @@ class _Parser:
                 raise ReadError(
                     "over_check_limit",
                     f"VRML: a number array holds over {cap:,} numbers, more than the checker's limits allow "
-                    "(3 x Limits.max_vertices coordinates, 4 x Limits.max_triangles indices)",
+                    f"(3 x Limits.max_vertices coordinates, 4 x Limits.max_triangles indices); {raise_hint()}",
                 )
             try:
                 parts.append(np.array(piece, dtype=np.float64))
@@ -406,7 +406,7 @@ class _Walker:
             raise ReadError("malformed", "VRML: Coordinate point count is not a multiple of 3")
         V = pts.reshape(-1, 3)
         ci = _nums(f.get("coordIndex"), "coordIndex")
-        self.b.reserve(len(V), max(0, len(ci) // 2), "VRML IndexedFaceSet")
+        self.b.reserve(len(V), _fan_count(ci), "VRML IndexedFaceSet")
         F, corner_of = _polygons(ci, "coordIndex")
         if not _bool(f.get("ccw"), True):
             F = F[:, ::-1]
@@ -487,6 +487,17 @@ def _children(v: Any) -> list[Any]:
     return []
 
 
+def _fan_count(ci: np.ndarray) -> int:
+    """How many fan triangles :func:`_polygons` makes of a -1-separated index list (a k-gon: k - 2), exactly.
+
+    (Half the list's length, the estimate before, refused an honest mesh
+    of triangles - four indices each - at half ``Limits.max_triangles``.)
+    """
+    ends = np.flatnonzero(ci == -1)
+    k = np.diff(np.concatenate([[-1], ends, [len(ci)]])) - 1  # polygon lengths, the trailing one too
+    return int(np.maximum(k - 2, 0).sum())
+
+
 def _polygons(ci: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:
     """Fan triangles from a -1-separated index list, and the list position of each corner."""
     if ci.size and not np.array_equal(ci, np.round(ci)):
@@ -539,7 +550,8 @@ def read_vrml(path: Path, data: bytes, limits: Limits, res: Resources | None = N
         raise ReadError(
             "over_check_limit",
             f"the VRML scene instances about {tri:,} triangles in {shapes:,} shapes (DEF/USE), over the checker's "
-            f"limits (Limits.max_triangles / --max-triangles, Limits.max_parts)",
+            f"limits ({limits.max_triangles:,} triangles, Limits.max_triangles; {limits.max_parts:,} shapes, "
+            f"Limits.max_parts); {raise_hint(tri if shapes <= limits.max_parts else None)}",
         )
     if visits > limits.max_node_visits:
         raise ReadError(
