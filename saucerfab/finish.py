@@ -112,19 +112,6 @@ def meshes_to_check(files: Mapping[str, Sequence[Path]], scratch: Path | None = 
         yield out
 
 
-def inflated_bytes(paths: Sequence[Path]) -> int:
-    """The most any of ``paths`` that is a zip (3MF, zipped OBJ) inflates to, by its own directory; 0 if none."""
-    most = 0
-    for p in paths:
-        try:
-            if zipfile.is_zipfile(p):
-                with zipfile.ZipFile(p) as zf:
-                    most = max(most, sum(i.file_size for i in zf.infolist()))
-        except (OSError, zipfile.BadZipFile):
-            continue  # the check itself will say what is wrong with it
-    return most
-
-
 def export_limits(result: Any) -> Any:
     """The checker's limits for the files an export wrote: the defaults, raised to what the export holds.
 
@@ -138,7 +125,7 @@ def export_limits(result: Any) -> Any:
     export's own sizes (never lowered); the checks then cost what a mesh of
     that size costs (~1 GB and ~15 s per million triangles).
     """
-    from saucerfab.check.limits import DEFAULT_LIMITS
+    from saucerfab.check.limits import DEFAULT_LIMITS, inflated_bytes
 
     paths = [Path(p) for ps in result.files.values() for p in ps]
     sizes = [p.stat().st_size for p in paths if p.is_file()]

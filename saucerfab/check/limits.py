@@ -41,6 +41,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 GIB = 1 << 30
@@ -276,3 +278,18 @@ def raise_hint(triangles: int | None = None) -> str:
                 f"(here ~{max(m, 0.1):.1f} GB and ~{max(15 * m, 1):.0f} s)")
     return (f"'saucerfab check --max-triangles N' raises the mesh-size caps (triangles; vertices, parts and bytes "
             f"in proportion), at {COST_PER_MILLION_TRIANGLES}")
+
+
+def inflated_bytes(paths: Sequence[Path]) -> int:
+    """The most any of ``paths`` that is a zip (3MF, zipped OBJ) inflates to, by its own directory; 0 if none."""
+    import zipfile
+
+    most = 0
+    for p in paths:
+        try:
+            if zipfile.is_zipfile(p):
+                with zipfile.ZipFile(p) as zf:
+                    most = max(most, sum(i.file_size for i in zf.infolist()))
+        except (OSError, zipfile.BadZipFile):
+            continue  # the check itself will say what is wrong with it
+    return most

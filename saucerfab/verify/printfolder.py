@@ -299,9 +299,8 @@ def folder_limits(folder: Path) -> Any:
     folder may come from elsewhere. A folder without a readable summary
     gets the defaults.
     """
-    from saucerfab.check.limits import DEFAULT_LIMITS
+    from saucerfab.check.limits import DEFAULT_LIMITS, inflated_bytes
     from saucerfab.fabricate.options import MAX_TEXTURE_PX
-    from saucerfab.finish import inflated_bytes
 
     lim = DEFAULT_LIMITS.with_(keep_texture_pixels=True)
     try:
