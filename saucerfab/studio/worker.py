@@ -92,6 +92,10 @@ def main(root: str, kind: str, run_id: str, printer: str | None = None) -> None:
     # sends each worker exactly one SIGINT (a second one could cut the checkpoint's save short).
     if hasattr(os, "setpgrp"):
         os.setpgrp()
+    # SIGINT is how the studio cancels (run_design saves its checkpoint on KeyboardInterrupt). A server
+    # started in the background by a non-interactive shell (`saucerfab studio &`, nohup, some service
+    # managers) has SIGINT ignored, and a spawned worker inherits that: it would never stop. Take it back.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     ws = Workspace(root, create=False)
     folder = ws.runs / run_id
     _log_to(folder / "worker.log")

@@ -7,6 +7,8 @@ import signal
 import time
 from pathlib import Path
 
+import pytest
+
 from studio_helpers import HEART, STAR, TINY
 
 from saucerfab.studio.jobs import Job, JobQueue
@@ -87,13 +89,23 @@ def _in_stage(rec: dict, prog: Path) -> bool:
         return False
 
 
-def test_shutdown_saves_the_checkpoint_and_leaves_the_run_interrupted(tmp_path: Path) -> None:
+@pytest.mark.parametrize("sigint_ignored", [False, True], ids=["sigint-default", "sigint-ignored"])
+def test_shutdown_saves_the_checkpoint_and_leaves_the_run_interrupted(tmp_path: Path, sigint_ignored: bool) -> None:
+    """``sigint-ignored``: a server started in the background by a non-interactive shell (``saucerfab studio &``)
+    has SIGINT ignored and its spawned workers inherit that; they must still stop on the studio's SIGINT
+    (before the fix they ran to "done": CI ran the suite so)."""
+    import signal
+
     ws = Workspace(tmp_path)
     run_id = _long_run(ws)
     q = JobQueue(ws, grace_s=20)
-    q.start()
-    q.submit(Job("design", run_id))
-    _wait(ws, run_id, _in_stage)
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN if sigint_ignored else signal.getsignal(signal.SIGINT))
+    try:
+        q.start()
+        q.submit(Job("design", run_id))
+        _wait(ws, run_id, _in_stage)
+    finally:
+        signal.signal(signal.SIGINT, old)
     q.shutdown()
     rec = ws.read_run(run_id)
     assert rec["status"] == "interrupted" and "resume" in rec["error"], rec
