@@ -86,6 +86,23 @@ def _log_to(path: Path) -> None:
     sys.stderr = open(2, "w", buffering=1, closefd=False)  # noqa: SIM115
 
 
+#: set once the studio has asked this worker to stop (SIGINT)
+_STOP_ASKED = False
+
+
+def _on_sigint(signum: int, frame: Any) -> None:
+    """Python's own Ctrl-C behaviour (KeyboardInterrupt), remembering that a stop was asked.
+
+    A library call the interrupt lands in may turn it into an error of its
+    own (a native extension, a compile); once a stop was asked, such an
+    error is the stop, not a fault of the design, and the run is recorded
+    as interrupted (its checkpoint keeps the stages that had finished).
+    """
+    global _STOP_ASKED
+    _STOP_ASKED = True
+    raise KeyboardInterrupt
+
+
 def main(root: str, kind: str, run_id: str, printer: str | None = None) -> None:
     """The worker process: run job ``kind`` ("design" or "export") of run ``run_id`` in workspace ``root``."""
     # Its own process group: a Ctrl-C at the server's terminal reaches the server only, which then
@@ -95,7 +112,7 @@ def main(root: str, kind: str, run_id: str, printer: str | None = None) -> None:
     # SIGINT is how the studio cancels (run_design saves its checkpoint on KeyboardInterrupt). A server
     # started in the background by a non-interactive shell (`saucerfab studio &`, nohup, some service
     # managers) has SIGINT ignored, and a spawned worker inherits that: it would never stop. Take it back.
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGINT, _on_sigint)
     ws = Workspace(root, create=False)
     folder = ws.runs / run_id
     _log_to(folder / "worker.log")
@@ -218,11 +235,16 @@ def _design_job(ws: Workspace, run_id: str, watch: _ParentWatch) -> None:
         print(f"studio worker: interrupted: {why}", file=sys.stderr)
         _end(ws, run_id, "interrupted", None)
         return
-    except SaucerfabError as exc:
-        _end(ws, run_id, "failed", ws.scrub(str(exc)))
-        return
-    except Exception as exc:  # a fault of saucerfab: the traceback stays in worker.log
-        traceback.print_exc()
+    except Exception as exc:
+        if _STOP_ASKED:  # the interrupt surfaced as another error: still the stop that was asked for
+            traceback.print_exc()
+            print("studio worker: interrupted (the error above is how the stop surfaced)", file=sys.stderr)
+            _end(ws, run_id, "interrupted", None)
+            return
+        if isinstance(exc, SaucerfabError):
+            _end(ws, run_id, "failed", ws.scrub(str(exc)))
+            return
+        traceback.print_exc()  # a fault of saucerfab: the traceback stays in worker.log
         _end(ws, run_id, "failed", f"internal error ({type(exc).__name__}: {ws.scrub(str(exc))[:300]}); the "
                                    f"traceback is in runs/{run_id}/worker.log; please report it with that file")
         return

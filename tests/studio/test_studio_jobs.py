@@ -108,7 +108,7 @@ def test_shutdown_saves_the_checkpoint_and_leaves_the_run_interrupted(tmp_path: 
         signal.signal(signal.SIGINT, old)
     q.shutdown()
     rec = ws.read_run(run_id)
-    assert rec["status"] == "interrupted" and "resume" in rec["error"], rec
+    assert rec["status"] == "interrupted" and "resume" in rec["error"], (rec["status"], rec.get("error"))
     assert (ws.runs / run_id / ".design.checkpoint" / "state.npz").is_file()
 
 
