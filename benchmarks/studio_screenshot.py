@@ -16,54 +16,17 @@ and 3D print. Prints how long each step took.
 from __future__ import annotations
 
 import argparse
-import os
-import signal
-import socket
-import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "tests" / "studio"))
 
 import browser  # noqa: E402  (tests/browser.py: Debian's Chromium through Playwright)
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _start(workspace: Path, port: int, log: Path) -> subprocess.Popen[bytes]:
-    with log.open("wb") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "saucerfab", "studio", "--workspace", str(workspace), "--port", str(port)],
-            cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
-        )
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            sys.exit(f"saucerfab studio exited:\n{log.read_text(errors='replace')[-3000:]}")
-        try:
-            with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/options", timeout=2):
-                return proc
-        except OSError:
-            time.sleep(0.2)
-    proc.kill()
-    sys.exit("saucerfab studio did not answer in 60 s")
-
-
-def _stop(proc: subprocess.Popen[bytes]) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
+from live_studio import free_port, start_studio, stop_studio  # noqa: E402  (tests/studio/live_studio.py)
 
 
 def main() -> None:
@@ -78,9 +41,9 @@ def main() -> None:
 
     tmp = tempfile.TemporaryDirectory(prefix="studio-shot-")
     workspace = args.workspace or Path(tmp.name) / "ws"
-    port = _free_port()
+    port = free_port()
     t0 = time.monotonic()
-    proc = _start(workspace, port, Path(tmp.name) / "server.log")
+    proc = start_studio(workspace, port, Path(tmp.name) / "server.log")
     print(f"server up after {time.monotonic() - t0:.1f} s (port {port}, workspace {workspace})")
     try:
         with browser.live_page((1280, 900)) as (page, errors):
@@ -134,7 +97,7 @@ def main() -> None:
             if errors:
                 print("page errors:", *errors, sep="\n  ")
     finally:
-        _stop(proc)
+        stop_studio(proc)
         tmp.cleanup()
     print(f"wrote {args.out} ({time.monotonic() - t0:.1f} s in all)")
 

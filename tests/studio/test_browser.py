@@ -22,12 +22,7 @@ test (it must not be skipped in CI).
 from __future__ import annotations
 
 import json
-import os
 import re
-import signal
-import socket
-import subprocess
-import sys
 import time
 import urllib.error
 import urllib.request
@@ -39,25 +34,11 @@ from typing import Any
 import pytest
 
 import browser
+from live_studio import free_port, http_get, start_studio, stop_studio
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "samples"
 ARTIFACTS = ROOT / "out" / "test-artifacts" / "studio"
-STARTUP_S = 60
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _get(url: str, timeout: float = 5) -> tuple[int, bytes]:
-    try:
-        with urllib.request.urlopen(url, timeout=timeout) as r:
-            return r.status, r.read()
-    except urllib.error.HTTPError as exc:
-        return exc.code, exc.read()
 
 
 def _post(url: str, data: bytes) -> tuple[int, dict[str, Any]]:
@@ -69,51 +50,10 @@ def _post(url: str, data: bytes) -> tuple[int, dict[str, Any]]:
         return exc.code, json.loads(exc.read())
 
 
-def start_studio(workspace: Path, port: int, log: Path) -> subprocess.Popen[bytes]:
-    """``saucerfab studio`` in a subprocess, once it answers ``GET /api/options``."""
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    with log.open("wb") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "saucerfab", "studio", "--workspace", str(workspace), "--port", str(port)],
-            cwd=ROOT,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            env=env,
-            start_new_session=True,
-        )
-    deadline = time.monotonic() + STARTUP_S
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise AssertionError(f"saucerfab studio exited with {proc.returncode}:\n{_tail(log)}")
-        try:
-            if _get(f"http://127.0.0.1:{port}/api/options", timeout=2)[0] == 200:
-                return proc
-        except OSError:
-            pass
-        time.sleep(0.2)
-    stop_studio(proc)
-    raise AssertionError(f"saucerfab studio did not answer in {STARTUP_S} s:\n{_tail(log)}")
-
-
-def _tail(log: Path) -> str:
-    return log.read_text(errors="replace")[-3000:]
-
-
-def stop_studio(proc: subprocess.Popen[bytes]) -> None:
-    """Ctrl-C the server (it stops its workers), then make sure."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=5)
-
-
 @pytest.fixture(scope="module")
 def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     tmp = tmp_path_factory.mktemp("studio")
-    port = _free_port()
+    port = free_port()
     log = tmp / "server.log"
     proc = start_studio(tmp / "ws", port, log)
     try:
@@ -289,7 +229,7 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         page.click("#start")
         _wait(page, "the copy", lambda: _shown_run(page) != first_id, 20, errors)
         copy_id = _shown_run(page)
-        status, body = _get(f"{studio}/api/runs/{copy_id}")
+        status, body = http_get(f"{studio}/api/runs/{copy_id}")
         record = json.loads(body)
         assert record["options"]["shape"] == "bowl" and record["options"]["resolution"] == 16, record["options"]
         _wait(page, "the copy in the history", lambda: page.locator("#history li").count() == 2, 10, errors)
@@ -308,7 +248,7 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         page.click("#run-delete")
         _wait(page, "the copy to be deleted", lambda: page.locator("#history li").count() == 1, 20, errors)
         assert page.locator("#run").is_hidden()
-        assert _get(f"{studio}/api/runs/{copy_id}")[0] == 404
+        assert http_get(f"{studio}/api/runs/{copy_id}")[0] == 404
 
         # ---- reopen the first design from the history; then a new, empty design ----
         page.click("#history li button")
