@@ -1,4 +1,4 @@
-"""What any print can score from a moved eye under verify's whole-picture shift (issue 19).
+"""What any print can score from a moved eye under the whole-picture-shift score (issue 19).
 
     .venv/bin/python benchmarks/bench_eyes.py                  # the graphic pairs
     .venv/bin/python benchmarks/bench_eyes.py --pairs all
@@ -6,8 +6,10 @@
 No optimisation and no export: for each pair (the default design's scene,
 frames fitted as ``saucerfab design`` fits them) and each of a viewer's two
 eyes, the picture each view shows that eye is computed for two prints, and
-scored against the reference as ``saucerfab verify`` scores a moved eye
-(256 px, best integer whole-picture shift within 10 % of the frame):
+scored against the reference as ``saucerfab verify`` scored a moved eye
+before the flat print (``saucerfab.verify/1``; now its ``psnr_shift_db``:
+256 px, best integer whole-picture shift within 10 % of the frame). This
+measurement is why verify/2 scores a moved eye against the flat print:
 
 * **flat decal**: the ideal print for every eye at once if the saucer were
   flat: each picture lying on the saucer's mean plane as the design eye

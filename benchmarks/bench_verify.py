@@ -9,8 +9,10 @@ plus ``--design-args``), ``saucerfab export --printer j55
 --cup-diameter-mm 80 --formats obj``, then ``saucerfab verify``'s library
 call at 256 px, 16 samples per pixel, from the design eye and a viewer's
 two eyes (32 mm left and right), and prints one markdown table row per
-pair and view: PSNR / SSIM / coverage per eye, with the design and verify
-wall times. The verify time is the issue's speed target (both views from
+pair and view: PSNR / SSIM / coverage from the design eye, each moved eye's
+PSNR against the flat print (verify's score) and, in brackets, against the
+picture after the best whole-picture shift (the score before the flat
+print), with the design and verify wall times. The verify time is the issue's speed target (both views from
 three eyes at 256 px within 60 s on 2 cores); the export's wall time of the
 same design, in the same run, is printed beside it as the reference.
 """
@@ -116,23 +118,25 @@ def printers_table(rows: list[dict]) -> str:
 
 
 def table(rows: list[dict], label: str) -> str:
+    """Per pair and view: the design eye's score, and each moved eye's against the flat print, with the
+    older score against the picture after a whole-picture shift in brackets."""
     decal = any(r.get("decal") for r in rows)
     out = [
-        (f"| pair ({label}) | view | design eye dB / SSIM / coverage | left eye dB (shift) | right eye dB (shift) "
-        + ("| left / right eye vs the flat decal dB " if decal else "") + "| design s | verify s |"),
+        (f"| pair ({label}) | view | design eye dB / SSIM / coverage | left eye dB (shifted picture dB) "
+         "| right eye dB (shifted picture dB) "
+         + ("| left / right eye vs the optimizer's decal dB " if decal else "") + "| design s | verify s |"),
         "|---|---|---|---|---|---|---|" + ("---|" if decal else ""),
     ]
+
+    def db(v: dict, key: str = "psnr_db") -> str:
+        return "-" if v.get(key) is None else f"{v[key]:.1f}"
+
     for r in rows:
         for view in ("direct", "reflected"):
             d, le, ri = (r["scores"][f"{view}/{e}"] for e in ("design", "left", "right"))
-
-            def db(v: dict) -> str:
-                return "-" if v["psnr_db"] is None else f"{v['psnr_db']:.1f}"
-
             out.append(
                 f"| {r['pair']} | {view} | {db(d)} / {d['ssim']:.2f} / {100 * d['coverage']:.0f}% "
-                f"| {db(le)} ({le['shift_px'][0]:+d},{le['shift_px'][1]:+d}) "
-                f"| {db(ri)} ({ri['shift_px'][0]:+d},{ri['shift_px'][1]:+d}) "
+                f"| {db(le)} ({db(le, 'psnr_shift_db')}) | {db(ri)} ({db(ri, 'psnr_shift_db')}) "
                 + (f"| {db(r['decal'][view + '/left'])} / {db(r['decal'][view + '/right'])} " if decal else "")
                 + f"| {r['design_s']:.0f} | {r['verify_s']:.1f} |"
             )

@@ -246,18 +246,20 @@ def write_design_report(folder: str | Path) -> Path:
 
 def verify_section(folder: Path, *, note: str = "") -> Section | None:
     """The verify results in ``folder/verify/`` (verify.json and its pictures) as a section, or None."""
+    from saucerfab.verify.results import SCHEMA
+
     ver = _json(folder / "verify" / "verify.json")
-    if not (ver and ver.get("schema") == "saucerfab.verify/1"):
+    if not (ver and ver.get("schema") == SCHEMA):
         return None
     rows, images = [], []
     for f in ver.get("files", []):
         for v in f.get("views", []):
             shift = v.get("shift_px") or [0, 0]
             rows.append([
-                Path(str(f.get("path", ""))).name, v.get("view"), v.get("eye"),
-                "-" if v.get("psnr_db") is None else f"{v['psnr_db']:.1f}",
-                "-" if v.get("ssim") is None else f"{v['ssim']:.3f}",
-                f"{100 * v.get('coverage', 0):.1f} %", f"{shift[0]:+d}, {shift[1]:+d}",
+                Path(str(f.get("path", ""))).name, v.get("view"), v.get("eye"), str(v.get("reference", "")),
+                _db(v.get("psnr_db")), "-" if v.get("ssim") is None else f"{v['ssim']:.3f}",
+                f"{100 * v.get('coverage', 0):.1f} %",
+                "" if v.get("psnr_shift_db") is None else f"{_db(v.get('psnr_shift_db'))} ({shift[0]:+d}, {shift[1]:+d})",
                 "pass" if v.get("passed") else "LOW",
             ])
             name = v.get("picture")
@@ -271,15 +273,23 @@ def verify_section(folder: Path, *, note: str = "") -> Section | None:
         "Verified: what the print shows",
         note
         + f"Ray-traced from the exported files with Mitsuba {r.get('version', '?')} ({r.get('variant', '?')}, "
-        f"{ver.get('res')} px, {ver.get('spp')} samples per pixel), the cup a perfect mirror, and compared with "
-        "each input as the design meant it, over the pixels where the saucer is seen (directly, or in the "
-        "mirror). From a moved eye the picture may move as a whole: the reference is shifted by the best "
-        f"whole-picture shift first (shown). Pass level {ver.get('min_psnr_db')} dB and "
-        f"{100 * float(ver.get('min_coverage', 0)):.0f} % coverage per view: "
+        f"{ver.get('res')} px, {ver.get('spp')} samples per pixel), the cup a perfect mirror, over the pixels "
+        "where the saucer is seen (directly, or in the mirror). From the design eye each view is compared with "
+        "the input as the design meant it. From a moved eye it is compared with the flat print: that picture "
+        "lying flat on the saucer, placed for the design eye, ray-traced from the moved eye, so what any flat "
+        "picture does from there (the tilted saucer's perspective, the mirror's distortion) is not counted and "
+        "what the print adds (the relief's parallax) is; the last column is the older score against the input "
+        "itself after the best whole-picture shift, which even a flat print fails. Pass level "
+        f"{ver.get('min_psnr_db')} dB and {100 * float(ver.get('min_coverage', 0)):.0f} % coverage per view: "
         + ("every view passes." if ver.get("passed") else "some views are under it."),
         images=images,
-        grid=(["file", "view", "eye", "PSNR dB", "SSIM", "coverage", "shift px", ""], rows),
+        grid=(["file", "view", "eye", "compared with", "PSNR dB", "SSIM", "coverage", "vs input, shifted dB (px)", ""],
+              rows),
     )
+
+
+def _db(v: object) -> str:
+    return "-" if not isinstance(v, (int, float)) else f"{v:.1f}"
 
 
 # --------------------------------------------------------------------------- print folder

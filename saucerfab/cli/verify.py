@@ -43,7 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--primary-only", action="store_true",
                    help="render only the first of OBJ, 3MF, GLB (the others are rendered from the design eye by default)")
     p.add_argument("-o", "--out", metavar="DIR", help="where to write the pictures and verify.json (default PRINT_DIR/verify)")
-    p.add_argument("--json", action="store_true", help="print the saucerfab.verify/1 JSON document on stdout")
+    p.add_argument("--json", action="store_true", help="print the saucerfab.verify/2 JSON document on stdout")
     add_schema_flag(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
 
@@ -59,7 +59,9 @@ def print_scores(result, out=None) -> None:  # type: ignore[no-untyped-def]
     for f in result.files:
         print(f"  {f.path.name}", file=out)
         for v in f.views:
-            shift = "" if v.shift_px == (0, 0) else f"  after a whole-picture shift of {v.shift_px[0]:+d},{v.shift_px[1]:+d} px"
+            shift = ("" if v.psnr_shift_db != v.psnr_shift_db else
+                     f"  against the flat print; the picture itself {v.psnr_shift_db:.1f} dB after a whole-picture shift "
+                     f"of {v.shift_px[0]:+d},{v.shift_px[1]:+d} px")
             psnr = "   -- " if v.psnr_db != v.psnr_db else f"{v.psnr_db:5.1f}"
             print(f"    {v.view:10s} {v.eye:8s} {psnr} dB  SSIM {v.ssim:4.2f}  coverage {v.coverage * 100:5.1f}%  "
                   f"{'ok' if v.passed else 'LOW'}{shift}", file=out)

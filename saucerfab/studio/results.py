@@ -56,7 +56,8 @@ def verify_rows(run_id: str, folder: Path, rel: str) -> list[dict[str, Any]]:
                 continue
             pic = v.get("picture")
             ok = isinstance(pic, str) and "/" not in pic and "\\" not in pic and (folder / "verify" / pic).is_file()
-            rows.append({"view": v.get("view"), "eye": v.get("eye"), "psnr_db": v.get("psnr_db"),
+            rows.append({"view": v.get("view"), "eye": v.get("eye"), "reference": v.get("reference"),
+                         "psnr_db": v.get("psnr_db"),
                          "coverage": v.get("coverage"), "passed": v.get("passed"),
                          "picture_url": file_url(run_id, f"{rel}/verify/{pic}") if ok else None})
     return rows

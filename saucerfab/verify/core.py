@@ -11,10 +11,15 @@ each eye (:mod:`.eyes`):
    meant it, resized to the render with a box filter) over the pixels where
    the saucer's top is seen - directly for the direct view, in the mirror
    for the reflected ones - and only pixels seen fully (coverage >= 0.999);
-3. from a moved eye the picture may move as a whole: the reference is
-   shifted by the best whole-picture shift (:func:`~.metrics.best_shift`,
-   up to ``max_shift_fraction`` of the frame) before PSNR and SSIM, and the
-   shift is reported; from the design eye nothing is shifted;
+3. from a moved eye the reference is the **flat print** (:mod:`.flatprint`):
+   the reference picture lying flat on the saucer, placed for the design
+   eye, ray-traced from the moved eye. What any flat picture does from
+   there (the tilted saucer's perspective, the mirror's anamorphosis) is in
+   both; what the print adds (the relief's parallax, the conflicts) is
+   what is scored. The older score is kept beside it: the reference picture
+   itself after the best whole-picture shift (:func:`~.metrics.best_shift`,
+   up to ``MAX_SHIFT_FRACTION`` of the frame), which no print can pass
+   (a perfectly flat print scores 12-25 dB there);
 4. coverage is the share of the frame the saucer fills in that view.
 
 A view passes when its PSNR is at least ``min_psnr_db`` and its coverage at
@@ -43,7 +48,8 @@ from saucerfab.verify.printfolder import (
     load_references,
     read_surface,
 )
-from saucerfab.verify.results import FileScore, VerifyResult, ViewScore
+from saucerfab.verify.raytrace import FULL_COVERAGE
+from saucerfab.verify.results import REFERENCE_FLAT_PRINT, REFERENCE_PICTURE, FileScore, VerifyResult, ViewScore
 
 #: default pass level per view, dB: a picture at 20 dB is plainly recognisable
 #: with visible flaws; graphic designs print at 30 dB and more from the design eye
@@ -52,8 +58,6 @@ DEFAULT_MIN_PSNR_DB = 20.0
 DEFAULT_MIN_COVERAGE = 0.5
 DEFAULT_RES = 256
 DEFAULT_SPP = 16
-#: pixels seen at least this fully are compared
-FULL_COVERAGE = 0.999
 #: largest whole-picture shift searched from a moved eye, as a share of the frame
 MAX_SHIFT_FRACTION = 0.1
 MAX_RES = 2048
@@ -156,6 +160,7 @@ def verify_print(
         VerifyInputError: the folder or a file in it cannot be used (exit 2).
         ConfigError: bad options.
     """
+    from saucerfab.verify.flatprint import FlatPrints
     from saucerfab.verify.raytrace import INTEGRATOR, PrintTracer, mitsuba
 
     t_start = time.perf_counter()
@@ -165,7 +170,10 @@ def verify_print(
         raise VerifyInputError(f"{folder} is not a folder; give the folder 'saucerfab export --out' wrote")
     scene = load_print_scene(folder)
     views = list(scene.views)
-    refs = {v: resize_box(img, res) for v, img in load_references(folder, views).items()}
+    full_refs = load_references(folder, views)
+    refs = {v: resize_box(img, res) for v, img in full_refs.items()}
+    # the flat prints' textures: the reference pictures as the files' textures are stored
+    pictures8 = {v: np.round(np.clip(img, 0.0, 1.0) * 255.0).astype(np.uint8) for v, img in full_refs.items()}
     files = find_mesh_files(folder)
     if not files:
         raise VerifyInputError(
@@ -197,6 +205,8 @@ def verify_print(
         surface = read_surface(path, fmt, scene, limits)
         tracer = PrintTracer(surface, scene.cup)
         fs = FileScore(path, fmt)
+        flats: FlatPrints | None = None
+        design_regions: dict[str, np.ndarray] = {}
         for eye in all_eyes if k == 0 else all_eyes[:1]:
             for view in views:
                 r = tracer.render(eye.position, scene.views[view], res, spp)
@@ -205,15 +215,24 @@ def verify_print(
                 ref = refs[view]
                 p0 = psnr(r.rgb, ref, region)
                 if eye.name == "design":
-                    sh_dx, sh_dy, p1, reg1, ref1 = 0, 0, p0, region, ref
+                    design_regions[view] = region
+                    p_shift, sh_dx, sh_dy, p1, reg1, ref1 = float("nan"), 0, 0, p0, region, ref
+                    kind = REFERENCE_PICTURE
                 else:
                     sh = best_shift(r.rgb, ref, region, max_shift)
-                    sh_dx, sh_dy, p1, reg1 = sh.dx, sh.dy, sh.psnr_db, sh.region
-                    ref1 = shifted(ref, sh.dx, sh.dy)[0]
+                    p_shift, sh_dx, sh_dy = sh.psnr_db, sh.dx, sh.dy
+                    if flats is None:
+                        flats = FlatPrints(surface, scene.cup, all_eyes[0].position, scene.views, pictures8,
+                                           design_regions, res, spp)
+                    ref1, flat_seen = flats.render(view, eye.position, scene.views[view], res, spp)
+                    reg1 = region & flat_seen
+                    p1 = psnr(r.rgb, ref1, reg1)
+                    kind = REFERENCE_FLAT_PRINT
                 s = ssim(r.rgb, ref1, reg1)
                 coverage = float(cov.mean())
                 ok = math.isfinite(p1) and p1 >= min_psnr_db and coverage >= min_coverage
-                score = ViewScore(view, eye.name, p1, p0, s, coverage, int(reg1.sum()), (sh_dx, sh_dy), ok)
+                score = ViewScore(view, eye.name, p1, p0, s, coverage, int(reg1.sum()), (sh_dx, sh_dy), ok,
+                                  reference=kind, psnr_shift_db=p_shift)
                 if pictures is not None:
                     from saucerfab.verify.pictures import write_view_picture
 
@@ -222,6 +241,7 @@ def verify_print(
                 if k == 0:
                     renders[(eye.name, view)] = r.rgb
                     renders[(eye.name, view + ":region")] = reg1
+                    renders[(eye.name, view + ":reference")] = ref1
                 fs.views.append(score)
                 step(f"{path.name}: {view} view from the {eye.name} eye {score.psnr_db:.1f} dB")
         scores.append(fs)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from saucerfab.verify.results import ViewScore
+from saucerfab.verify.results import REFERENCE_PICTURE, ViewScore
 
 #: absolute difference (mean over RGB, sRGB units) shown at the top of the heat map's scale
 HEAT_MAX = 0.5
@@ -28,11 +28,11 @@ def view_picture(render: np.ndarray, ref: np.ndarray, region: np.ndarray, score:
     """The three panels as one (H, W, 3) uint8 picture, titled with the scores."""
     from saucerfab.report import side_by_side
 
-    shift = "" if score.shift_px == (0, 0) else f", shifted {score.shift_px[0]:+d},{score.shift_px[1]:+d} px"
+    meant = "meant" if score.reference == REFERENCE_PICTURE else "a flat print, from this eye"
     return side_by_side(
         [
             (f"printed: {score.view}, {score.eye} eye", render),
-            (f"meant{shift}", ref),
+            (meant, ref),
             (f"|difference| {score.psnr_db:.1f} dB, SSIM {score.ssim:.2f}", difference_map(render, ref, region)),
         ],
         height=max(256, render.shape[0]),

@@ -40,6 +40,8 @@ import numpy as np
 from saucerfab.errors import SaucerfabError
 from saucerfab.verify.printfolder import CupSpec, PrintedSurface, ViewSpec
 
+#: pixels seen at least this fully are compared (a pixel's share where the top is seen)
+FULL_COVERAGE = 0.999
 #: Mitsuba variant used unless SAUCERFAB_MITSUBA_VARIANT says otherwise
 DEFAULT_VARIANT = "scalar_rgb"
 VARIANT_ENV = "SAUCERFAB_MITSUBA_VARIANT"
@@ -240,22 +242,97 @@ class PrintTracer:
         ``view.viewing_angle_deg``; row 0 at the top, +x of the view to the right.
         """
         mi = self._mi
-        dist = math.dist(eye, view.target)
-        sensor = mi.load_dict(
-            {
-                "type": "perspective",
-                "fov": 2.0 * view.viewing_angle_deg,
-                "fov_axis": "x",
-                "near_clip": max(1e-3, dist * 1e-4),
-                "far_clip": dist * 10 + self.extent_mm * 10,
-                "to_world": mi.ScalarTransform4f().look_at(origin=list(eye), target=list(view.target), up=[0, 0, 1]),
-                "film": {"type": "hdrfilm", "width": int(size), "height": int(size), "pixel_format": "rgb",
-                         "rfilter": {"type": "box"}},
-                "sampler": {"type": "stratified", "sample_count": int(spp)},
-            }
-        )
+        sensor = _sensor(mi, eye, view, size, spp, self.extent_mm)
         rgb = np.array(mi.render(self._colour, sensor=sensor, spp=int(spp), seed=seed), dtype=np.float32)
         cov = np.array(mi.render(self._cover, sensor=sensor, spp=int(spp), seed=seed), dtype=np.float32)
         direct = np.clip(cov[..., 0], 0.0, 1.0)
         reflected = np.clip(cov[..., 1] - cov[..., 0], 0.0, 1.0)
         return ViewRender(np.clip(rgb, 0.0, 1.0), direct, reflected)
+
+
+def _sensor(mi: Any, eye: tuple[float, float, float], view: ViewSpec, size: int, spp: int, extent_mm: float) -> Any:
+    """The camera of :mod:`saucerfab.render.camera`: a look-at from ``eye`` to the view's target, z up, square."""
+    dist = math.dist(eye, view.target)
+    return mi.load_dict(
+        {
+            "type": "perspective",
+            "fov": 2.0 * view.viewing_angle_deg,
+            "fov_axis": "x",
+            "near_clip": max(1e-3, dist * 1e-4),
+            "far_clip": dist * 10 + extent_mm * 10,
+            "to_world": mi.ScalarTransform4f().look_at(origin=list(eye), target=list(view.target), up=[0, 0, 1]),
+            "film": {"type": "hdrfilm", "width": int(size), "height": int(size), "pixel_format": "rgb",
+                     "rfilter": {"type": "box"}},
+            "sampler": {"type": "stratified", "sample_count": int(spp)},
+        }
+    )
+
+
+#: where a position pass puts a coordinate: ``(c - low) / span + POSITION_OFFSET``, in
+#: (0, 1.5): Mitsuba refuses negative radiance, and an offset keeps a pixel's
+#: coverage (the third channel) apart from its coordinates
+POSITION_OFFSET = 0.25
+
+
+@dataclass(frozen=True)
+class PositionScene:
+    """A mesh that emits its own coordinates, with the mirror cup: see :func:`position_scene`."""
+
+    scene: Any
+    axes: tuple[int, int]
+    low: np.ndarray
+    span: float
+    extent_mm: float
+
+
+def position_scene(vertices: np.ndarray, faces: np.ndarray, cup: CupSpec, axes: tuple[int, int] = (0, 1)) -> PositionScene:
+    """A scene where ``faces`` emit two of their coordinates and 1, and the cup mirrors them.
+
+    Args:
+        vertices: (V, 3) mm. faces: (F, 3). axes: the two coordinates emitted (0 x, 1 y, 2 z).
+    """
+    mi = mitsuba()
+    black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
+    used = np.unique(faces)
+    low = vertices[used].min(axis=0)
+    span = float(max(np.ptp(vertices[used], axis=0).max(), 1e-9))
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(black)
+    props["emitter"] = mi.load_dict({"type": "area", "radiance": {"type": "mesh_attribute", "name": "vertex_color"}})
+    m = mi.Mesh("positions", vertex_count=int(vertices.shape[0]), face_count=int(faces.shape[0]), props=props)
+    p = mi.traverse(m)
+    p["vertex_positions"] = type(p["vertex_positions"])(np.ascontiguousarray(vertices, np.float32).ravel())
+    p["faces"] = type(p["faces"])(np.ascontiguousarray(faces, np.uint32).ravel())
+    p.update()
+    code = np.ones((vertices.shape[0], 3), np.float64)
+    for k, a in enumerate(axes):
+        code[:, k] = (vertices[:, a] - low[a]) / span + POSITION_OFFSET
+    m.add_attribute("vertex_color", 3, [float(v) for v in code.astype(np.float32).ravel()])
+    cpos, cfaces, cnorm = cup_mesh(cup)
+    cap_p, cap_f = _cap(cup)
+    scene = mi.load_dict({
+        "type": "scene",
+        "integrator": INTEGRATOR,
+        "positions": m,
+        "cup": _mesh(mi, "cup", cpos, cfaces, bsdf={"type": "conductor", "material": "none"}, normals=cnorm),
+        "cup_top": _mesh(mi, "cup_top", cap_p, cap_f, bsdf=black),
+    })
+    return PositionScene(scene, axes, low, span, float(np.ptp(vertices[used], axis=0).max()))
+
+
+def render_positions(ps: PositionScene, eye: tuple[float, float, float], view: ViewSpec, size: int, spp: int) -> dict[str, np.ndarray]:
+    """What point of a :func:`position_scene` each pixel sees (directly or in the mirror), on average.
+
+    Returns:
+        ``xyz``: (S, S, 3) mm, the pixel's mean point (NaN in the axis not emitted
+        and where nothing is seen); ``full``: (S, S) bool, seen over the pixel's whole area.
+    """
+    mi = mitsuba()
+    img = np.array(mi.render(ps.scene, sensor=_sensor(mi, eye, view, size, spp, ps.extent_mm), spp=int(spp)), np.float64)
+    cov = img[..., 2]
+    full = cov >= FULL_COVERAGE
+    xyz = np.full(img.shape[:2] + (3,), np.nan)
+    seen = cov > 0
+    for k, a in enumerate(ps.axes):
+        xyz[seen, a] = (img[seen, k] / cov[seen] - POSITION_OFFSET) * ps.span + ps.low[a]
+    return {"xyz": xyz, "full": full}

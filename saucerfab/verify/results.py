@@ -1,4 +1,4 @@
-"""What ``saucerfab verify`` found: scores per view, per file, and the whole result (schema ``saucerfab.verify/1``).
+"""What ``saucerfab verify`` found: scores per view, per file, and the whole result (schema ``saucerfab.verify/2``).
 
 Plain data with their JSON form; :mod:`.core` makes them, :mod:`.pictures`
 titles its pictures with them and the CLI prints them.
@@ -16,7 +16,12 @@ import numpy as np
 from saucerfab import __version__
 from saucerfab.verify.eyes import Eye
 
-SCHEMA = "saucerfab.verify/1"
+SCHEMA = "saucerfab.verify/2"
+
+#: what a view was compared with: the design eye sees the reference picture itself
+REFERENCE_PICTURE = "picture"
+#: a moved eye sees the flat print: the picture lying flat on the saucer, seen from that eye (:mod:`.flatprint`)
+REFERENCE_FLAT_PRINT = "flat print"
 
 
 @dataclass
@@ -26,14 +31,19 @@ class ViewScore:
     Attributes:
         view: ``direct``, ``reflected`` or ``reflected2``.
         eye: the eye's name.
-        psnr_db: PSNR after the shift (none from the design eye), dB; NaN if nothing is seen.
-        psnr_unshifted_db: PSNR without any shift, dB.
-        ssim: mean SSIM over the compared pixels, after the shift.
+        psnr_db: PSNR against ``reference``, dB; NaN if nothing is seen.
+        psnr_unshifted_db: PSNR against the reference picture itself, no shift, dB.
+        ssim: mean SSIM against ``reference`` over the compared pixels.
         coverage: share of the frame where the saucer is seen in this view.
         pixels: pixels compared.
-        shift_px: (dx, dy) the reference was moved (right, down) to match.
+        shift_px: (dx, dy) the reference picture was moved (right, down) for ``psnr_shift_db``.
         passed: psnr and coverage at least the levels asked for.
         picture: the side-by-side picture's file name, if written.
+        reference: what the render was compared with: :data:`REFERENCE_PICTURE` (the
+            design eye) or :data:`REFERENCE_FLAT_PRINT` (a moved eye).
+        psnr_shift_db: a moved eye's PSNR against the reference picture after the best
+            whole-picture shift (the score before the flat print, which even a perfectly
+            flat print fails from a moved eye); NaN from the design eye.
     """
 
     view: str
@@ -46,6 +56,8 @@ class ViewScore:
     shift_px: tuple[int, int]
     passed: bool
     picture: str | None = None
+    reference: str = REFERENCE_PICTURE
+    psnr_shift_db: float = float("nan")
 
     def to_dict(self) -> dict[str, Any]:
         def num(v: float, nd: int) -> float | None:
@@ -62,6 +74,8 @@ class ViewScore:
             "shift_px": [int(self.shift_px[0]), int(self.shift_px[1])],
             "passed": bool(self.passed),
             "picture": self.picture,
+            "reference": self.reference,
+            "psnr_shift_db": num(self.psnr_shift_db, 2),
         }
 
 
@@ -123,7 +137,7 @@ class VerifyResult:
         return None
 
     def to_dict(self, *, record_times: bool = True) -> dict[str, Any]:
-        """JSON-ready, schema ``saucerfab.verify/1``; without times when ``record_times`` is False."""
+        """JSON-ready, schema ``saucerfab.verify/2``; without times when ``record_times`` is False."""
         d = {
             "schema": SCHEMA,
             "saucerfab_version": __version__,

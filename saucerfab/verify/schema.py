@@ -1,4 +1,4 @@
-"""JSON Schema of ``saucerfab verify --json`` (``saucerfab.verify/1``); ``saucerfab verify --schema`` prints it."""
+"""JSON Schema of ``saucerfab verify --json`` (``saucerfab.verify/2``); ``saucerfab verify --schema`` prints it."""
 
 from __future__ import annotations
 
@@ -8,19 +8,24 @@ _NUM_OR_NULL = {"type": ["number", "null"]}
 
 VIEW_SCORE: dict[str, Any] = {
     "type": "object",
-    "required": ["view", "eye", "psnr_db", "psnr_unshifted_db", "ssim", "coverage", "pixels", "shift_px", "passed"],
+    "required": ["view", "eye", "psnr_db", "psnr_unshifted_db", "ssim", "coverage", "pixels", "shift_px", "passed",
+                 "reference", "psnr_shift_db"],
     "properties": {
         "view": {"enum": ["direct", "reflected", "reflected2"]},
         "eye": {"type": "string", "description": "design, left, right or box(+R,+U) (mm right, up of the design eye)"},
-        "psnr_db": {**_NUM_OR_NULL, "description": "PSNR after the best whole-picture shift (none from the design eye); "
-                                                   "null when no pixel of the view shows the saucer"},
-        "psnr_unshifted_db": _NUM_OR_NULL,
+        "psnr_db": {**_NUM_OR_NULL, "description": "PSNR against `reference`; null when no pixel of the view shows the saucer"},
+        "psnr_unshifted_db": {**_NUM_OR_NULL, "description": "PSNR against the reference picture, unshifted"},
+        "reference": {"enum": ["picture", "flat print"],
+                      "description": "picture: the reference picture (the design eye); flat print: the picture lying flat "
+                                     "on the saucer, placed for the design eye, seen from this eye (a moved eye)"},
+        "psnr_shift_db": {**_NUM_OR_NULL, "description": "a moved eye: PSNR against the reference picture after the best "
+                                                         "whole-picture shift (`shift_px`); null from the design eye"},
         "ssim": _NUM_OR_NULL,
         "coverage": {"type": "number", "minimum": 0, "maximum": 1,
                      "description": "share of the view's frame where the saucer is seen (directly / in the mirror)"},
         "pixels": {"type": "integer", "minimum": 0, "description": "pixels compared (seen fully)"},
         "shift_px": {"type": "array", "items": {"type": "integer"}, "minItems": 2, "maxItems": 2,
-                     "description": "reference moved right, down to match, pixels"},
+                     "description": "reference picture moved right, down for psnr_shift_db, pixels"},
         "passed": {"type": "boolean"},
         "picture": {"type": ["string", "null"], "description": "side-by-side picture, relative to the pictures folder"},
     },
@@ -33,7 +38,7 @@ JSON_SCHEMA: dict[str, Any] = {
     "required": ["schema", "saucerfab_version", "folder", "renderer", "res", "spp", "min_psnr_db", "min_coverage",
                  "passed", "exit_code", "eyes", "where_to_stand", "files"],
     "properties": {
-        "schema": {"const": "saucerfab.verify/1"},
+        "schema": {"const": "saucerfab.verify/2"},
         "saucerfab_version": {"type": "string"},
         "folder": {"type": "string"},
         "renderer": {"type": "object", "required": ["name", "version", "variant", "integrator"]},

@@ -153,7 +153,7 @@ def test_cli_design_json_short_options_and_force(tmp_path, capsys) -> None:
     assert set(d) == {"design", "enhancement", "stages", "final", "verify"}
     assert d["design"] == str(out)
     assert d["enhancement"]["strategy"] == "subject"
-    assert d["verify"]["schema"] == "saucerfab.verify/1"  # the quick verify of a trial export
+    assert d["verify"]["schema"] == "saucerfab.verify/2"  # the quick verify of a trial export
     assert [s["name"] for s in d["stages"]] == ["bw_sigma_large", "bw_sigma_small", "sparse"]
     for st in d["stages"]:
         assert {"name", "iterations", "E_visual", "E_deform", "stop_reason", "seconds"} <= set(st)

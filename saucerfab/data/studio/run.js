@@ -365,7 +365,7 @@ function findingsList(check) {
   return box;
 }
 
-/** verify rows [{view, eye, psnr_db, coverage, passed, ...}] as a table, with any pictures the rows link. */
+/** verify rows [{view, eye, reference, psnr_db, coverage, passed, ...}] as a table, with any pictures the rows link. */
 function verifyTable(box, rows, { collapse = false } = {}) {
   box.replaceChildren();
   if (!rows.length) {
@@ -374,7 +374,7 @@ function verifyTable(box, rows, { collapse = false } = {}) {
   }
   const table = el("table", "verify");
   const head = el("tr");
-  for (const h of ["view", "eye", "PSNR (dB)", "coverage", ""]) head.append(el("th", "", h));
+  for (const h of ["view", "eye", "compared with", "PSNR (dB)", "coverage", ""]) head.append(el("th", "", h));
   table.append(head);
   const gallery = el("div", "gallery small");
   for (const row of rows) {
@@ -382,6 +382,7 @@ function verifyTable(box, rows, { collapse = false } = {}) {
     tr.append(
       el("td", "", human(row.view)),
       el("td", "", human(row.eye)),
+      el("td", "", row.reference === "flat print" ? "a flat print, from this eye" : "the picture"),
       el("td", "num", row.psnr_db != null ? Number(row.psnr_db).toFixed(1) : ""),
       el("td", "num", row.coverage != null ? `${Math.round(100 * row.coverage)} %` : ""),
       el("td", row.passed ? "ok" : "bad", row.passed ? "passed" : "low"),
