@@ -32,8 +32,9 @@ from saucerfab.render._simd import ftz_on, ftz_restore, vexp
 from saucerfab.render.soft_common import SoftParams, WSUM_EPS
 from saucerfab.render.soft_tiles import JIT_OPTS, LANES, N_GRAD, NLOC, SW, TILE_H, TILE_W
 
-#: per-column gradient accumulators of the backward
-N_ACC = 18
+#: lanes of the backward's flat scratch per field: every pair of one entry, and room
+#: for the last copied lane group
+NSCR = TILE_H * TILE_W + LANES
 
 # index of each constant in the parameter vector K handed to the kernels
 K_THR, K_INV_SIGMA, K_NEAR, K_FAR, K_INV_FR, K_INV_GAMMA, K_EPS, K_SUM0, K_BG = 0, 1, 2, 3, 4, 5, 6, 7, 8
@@ -284,13 +285,13 @@ def _lane_sum(a, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
     return tot
 
 
-@njit(error_model="numpy", cache=True, nogil=True, fastmath={"contract", "reassoc"})
-def _lane_dot(a, b, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
-    """sum(a[:n] * b[:n]), vectorized as :func:`_lane_sum`."""
-    tot = a[0] - a[0]
-    for k in range(n):
-        tot += a[k] * b[k]
-    return tot
+@njit(**JIT_OPTS, **_INLINE)
+def _copy_group(dst, src, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """``dst[:m] = src[:m]``, ``m = min(n, LANES)``: a loop of at most LANES iterations,
+    which LLVM vectorizes LANES wide (numba runs no SLP vectorizer, so a written-out
+    copy would stay scalar)."""
+    for k in range(min(n, LANES)):
+        dst[k] = src[k]
 
 
 @njit(**JIT_OPTS)
@@ -319,123 +320,144 @@ def _backward_tile(
             st[4 * NLOC + q] = a0 * image[r, c, 0] + a1 * image[r, c, 1] + a2 * image[r, c, 2]
             st[5 * NLOC + q] = g_alpha[r, c] * st_p[g]
 
-    # Gradient accumulators per column of the face's span, summed over its rows
-    # elementwise (vectorizes without reassociation), reduced once per entry.
-    # Slots 0-5: corner x, y; 6-8: sum of dL/dw_k (times px at the reduction:
-    # the matrix row's x and constant terms); 9-11: sum of dL/dw_k * py;
-    # 12-14: inverse depths; 15-17: colours.
-    acc = np.zeros(N_ACC * SW, K.dtype)
+    # The pairs of one entry are packed row after row into a flat scratch (the
+    # forward's lo..hi of each row: a convex region meets a row in one run), so
+    # the lane groups are full whatever the rows' spans (at sigma 1e-7 they are
+    # 1-4 pixels: one group per entry instead of one per row). Scratch fields
+    # (NSCR apart): 0 px, 1 py, then the 6 tile-state fields of the pixel.
+    scr = np.zeros(8 * NSCR, K.dtype)
+    # Gradient accumulators, one per lane of a group, summed over the entry's
+    # groups in order and reduced once per entry: slots 0-5 corner x, y;
+    # 6-8 dL/dw_k * px, 9-11 dL/dw_k * py, 12-14 dL/dw_k (barycentric matrix
+    # row k: x, y, constant coefficient); 15-17 inverse depths; 18-20 colours.
+    acc = np.empty(N_GRAD * LANES, K.dtype)
     for idx in range(tile_start[t], tile_start[t + 1]):
         entry = tile_entry[idx]
         f, ra, rb, ca, cbx = _entry_span(entry, entry_face, box, rt0, ct0)
-        if rb < ra or cbx < ca:
-            for j in range(N_GRAD):
-                grad[entry, j] = zero
-            continue
-        # a row's lanes start at its first unskipped pair (the forward's row_lo)
-        # and may run up to LANES - 1 past the box; m covers every row's lanes
-        m = min(cbx - ca + LANES, SW - (ca - ct0))
-        ac = acc[ca - ct0:]  # accumulator j of column ca + k is ac[j * SW + k]
-        for j in range(N_ACC):  # clear only the columns this entry uses
-            ac[j * SW:j * SW + m] = zero
-        rs = row_start[entry] - ra
-        (ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2,
-         i00, i01, i02, i10, i11, i12, i20, i21, i22, iz0, iz1, iz2, fr, fg, fb) = _face_consts(
-            f, cxy, inv, iz, col, ee_min, one
-        )
-        for r in range(ra, rb + 1):
-            lo, hi = row_lo[rs + r], row_hi[rs + r]
-            if hi < lo:
-                continue  # every pair of this row is skipped
-            n = (hi - lo + LANES) // LANES * LANES
-            last = np.int32(hi - lo)
-            py = py_tab[r]
-            b0 = i01 * py + i02
-            b1 = i11 * py + i12
-            b2 = i21 * py + i22
-            hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
-            sv = st[(r - rt0) * SW + (ca + lo - ct0):]
-            av = ac[lo:]
-            pxv = px_tab[ca + lo:]
-            for lane in range(n):
-                px = pxv[lane]
-                w0, w1, w2, inside = _bary(px, i00, i10, i20, b0, b1, b2, zero, one)
-                # nearest segment, keeping which edge and where on it (t) for the gradient
-                bt, bdx, bdy, d2 = _segment(px, hy0, ax0, ex0, ey0, ie0, zero, one)
-                e1sel, d2, bt, bdx, bdy = _nearer(px, hy1, ax1, ex1, ey1, ie1, zero, one, d2, bt, bdx, bdy)
-                e2sel, d2, bt, bdx, bdy = _nearer(px, hy2, ax2, ex2, ey2, ie2, zero, one, d2, bt, bdx, bdy)
-                e1sel = e1sel & (not e2sel)
-                e0sel = not (e1sel | e2sel)
-                # lanes past hi are pairs the forward masked out (beyond the box)
-                valid = (inside | (d2 < thr)) & (np.int32(lane) <= last)
-                xs = (d2 if inside else -d2) * inv_sigma
-                cov, unc = _coverage(xs, zero, one)
-                wc0, wc1, wc2 = _clip01(w0, w1, w2, zero, one)
-                rsw = wc0 + wc1 + wc2
-                sw = max(rsw, wsum_min)
-                rnum = one / (wc0 * iz0 + wc1 * iz1 + wc2 * iz2)
-                z = sw * rnum
-                rgb = valid & (z >= near) & (z <= far)
-                zn = (far - z) * inv_fr
-                ez = vexp(min(zn - sv[lane], zero) * inv_gamma)
-                wf = cov * ez
-                wf = wf if rgb else zero  # the pair's softmax weight, shifted by the max
-                gw = sv[NLOC + lane] * fr + sv[2 * NLOC + lane] * fg + sv[3 * NLOC + lane] * fb
-                gw = gw - sv[4 * NLOC + lane]  # dL/dweight * sum
-                # dL/dxs: alpha through prod(1 - D), colour through the weight
-                ga = sv[5 * NLOC + lane] * cov
-                gx = (ga if valid else zero) + gw * wf * unc
-                gd = two * gx * inv_sigma
-                gd = gd if inside else -gd  # d(sign d^2)/d(d^2)
-                u, v = gd * bdx, gd * bdy
-                omt = one - bt
-                k0 = (omt if e0sel else zero) + (bt if e2sel else zero)
-                k1 = (omt if e1sel else zero) + (bt if e0sel else zero)
-                k2 = (omt if e2sel else zero) + (bt if e1sel else zero)
-                av[lane] += u * k0
-                av[1 * SW + lane] += v * k0
-                av[2 * SW + lane] += u * k1
-                av[3 * SW + lane] += v * k1
-                av[4 * SW + lane] += u * k2
-                av[5 * SW + lane] += v * k2
-                # depth: zn = (far - z)/(far - near), z = sw / num, num = sum_k wc_k iz_k,
-                # sw = max(sum_k wc_k, wsum_min): with gzr = -dL/dz / num,
-                # dL/dnum = gzr z and dL/dsw = -gzr
-                gzr = gw * wf * inv_gamma * inv_fr * rnum
-                gzr = gzr if rgb else zero
-                # masked after the product: z is inf where float32 rounding clips
-                # all three barycentrics of a sliver face to 0, and 0 * inf is NaN
-                gnum = gzr * z
-                gnum = gnum if rgb else zero
-                zsub = gzr if rsw >= wsum_min else zero
-                gw0 = gnum * iz0 - zsub
-                gw1 = gnum * iz1 - zsub
-                gw2 = gnum * iz2 - zsub
-                # the clamp passes the gradient on [0, 1] (as torch.clamp does)
-                gw0 = gw0 if (w0 >= zero) & (w0 <= one) else zero
-                gw1 = gw1 if (w1 >= zero) & (w1 <= one) else zero
-                gw2 = gw2 if (w2 >= zero) & (w2 <= one) else zero
-                av[6 * SW + lane] += gw0
-                av[7 * SW + lane] += gw1
-                av[8 * SW + lane] += gw2
-                av[9 * SW + lane] += gw0 * py
-                av[10 * SW + lane] += gw1 * py
-                av[11 * SW + lane] += gw2 * py
-                av[12 * SW + lane] += gnum * wc0
-                av[13 * SW + lane] += gnum * wc1
-                av[14 * SW + lane] += gnum * wc2
-                av[15 * SW + lane] += sv[NLOC + lane] * wf
-                av[16 * SW + lane] += sv[2 * NLOC + lane] * wf
-                av[17 * SW + lane] += sv[3 * NLOC + lane] * wf
-        pxa = px_tab[ca:]
+        acc[:] = zero
+        total = 0
+        if rb >= ra and cbx >= ca:
+            rs = row_start[entry] - ra
+            for r in range(ra, rb + 1):
+                lo, hi = row_lo[rs + r], row_hi[rs + r]
+                if hi < lo:
+                    continue  # every pair of this row is skipped
+                py = py_tab[r]
+                src = st[(r - rt0) * SW + (ca + lo - ct0):]
+                pxs = px_tab[ca + lo:]
+                dst = scr[total:]
+                # whole lane groups (constant length: LLVM copies them as vectors); the
+                # lanes past hi stay within the row's padding and are overwritten by the
+                # next row or lie past the entry's total
+                ng = (hi - lo + LANES) // LANES * LANES
+                for g0 in range(0, ng, LANES):
+                    _copy_group(dst[g0:], pxs[g0:], ng - g0)
+                    dpy = dst[NSCR + g0:]
+                    for k in range(min(ng - g0, LANES)):
+                        dpy[k] = py
+                    for j in range(6):
+                        _copy_group(dst[(2 + j) * NSCR + g0:], src[j * NLOC + g0:], ng - g0)
+                total += hi - lo + 1
+        if total > 0:
+            (ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2,
+             i00, i01, i02, i10, i11, i12, i20, i21, i22, iz0, iz1, iz2, fr, fg, fb) = _face_consts(
+                f, cxy, inv, iz, col, ee_min, one
+            )
+            # whole lane groups, each a loop of at most LANES iterations: LLVM vectorizes
+            # it LANES wide (a partial group would run in its scalar remainder loop);
+            # the lanes past the total hold stale scratch and are masked out
+            n = (total + LANES - 1) // LANES * LANES
+            t32 = np.int32(total)
+            for g0 in range(0, n, LANES):
+                sv = scr[g0:]
+                g32 = np.int32(g0)
+                for lane in range(min(n - g0, LANES)):
+                    px = sv[lane]
+                    py = sv[NSCR + lane]
+                    b0 = i01 * py + i02
+                    b1 = i11 * py + i12
+                    b2 = i21 * py + i22
+                    hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
+                    w0, w1, w2, inside = _bary(px, i00, i10, i20, b0, b1, b2, zero, one)
+                    # nearest segment, keeping which edge and where on it (t) for the gradient
+                    bt, bdx, bdy, d2 = _segment(px, hy0, ax0, ex0, ey0, ie0, zero, one)
+                    e1sel, d2, bt, bdx, bdy = _nearer(px, hy1, ax1, ex1, ey1, ie1, zero, one, d2, bt, bdx, bdy)
+                    e2sel, d2, bt, bdx, bdy = _nearer(px, hy2, ax2, ex2, ey2, ie2, zero, one, d2, bt, bdx, bdy)
+                    e1sel = e1sel & (not e2sel)
+                    e0sel = not (e1sel | e2sel)
+                    # int32 lane numbers: 64-bit ones would halve the vector width
+                    valid = (inside | (d2 < thr)) & (np.int32(lane) + g32 < t32)
+                    xs = (d2 if inside else -d2) * inv_sigma
+                    cov, unc = _coverage(xs, zero, one)
+                    wc0, wc1, wc2 = _clip01(w0, w1, w2, zero, one)
+                    rsw = wc0 + wc1 + wc2
+                    sw = max(rsw, wsum_min)
+                    rnum = one / (wc0 * iz0 + wc1 * iz1 + wc2 * iz2)
+                    z = sw * rnum
+                    rgb = valid & (z >= near) & (z <= far)
+                    zn = (far - z) * inv_fr
+                    ez = vexp(min(zn - sv[2 * NSCR + lane], zero) * inv_gamma)
+                    wf = cov * ez
+                    wf = wf if rgb else zero  # the pair's softmax weight, shifted by the max
+                    a0, a1, a2 = sv[3 * NSCR + lane], sv[4 * NSCR + lane], sv[5 * NSCR + lane]
+                    gw = a0 * fr + a1 * fg + a2 * fb
+                    gw = gw - sv[6 * NSCR + lane]  # dL/dweight * sum
+                    # dL/dxs: alpha through prod(1 - D), colour through the weight
+                    ga = sv[7 * NSCR + lane] * cov
+                    gx = (ga if valid else zero) + gw * wf * unc
+                    gd = two * gx * inv_sigma
+                    gd = gd if inside else -gd  # d(sign d^2)/d(d^2)
+                    u, v = gd * bdx, gd * bdy
+                    omt = one - bt
+                    k0 = (omt if e0sel else zero) + (bt if e2sel else zero)
+                    k1 = (omt if e1sel else zero) + (bt if e0sel else zero)
+                    k2 = (omt if e2sel else zero) + (bt if e1sel else zero)
+                    acc[lane] += u * k0
+                    acc[1 * LANES + lane] += v * k0
+                    acc[2 * LANES + lane] += u * k1
+                    acc[3 * LANES + lane] += v * k1
+                    acc[4 * LANES + lane] += u * k2
+                    acc[5 * LANES + lane] += v * k2
+                    # depth: zn = (far - z)/(far - near), z = sw / num, num = sum_k wc_k iz_k,
+                    # sw = max(sum_k wc_k, wsum_min): with gzr = -dL/dz / num,
+                    # dL/dnum = gzr z and dL/dsw = -gzr
+                    gzr = gw * wf * inv_gamma * inv_fr * rnum
+                    gzr = gzr if rgb else zero
+                    # masked after the product: z is inf where float32 rounding clips
+                    # all three barycentrics of a sliver face to 0, and 0 * inf is NaN
+                    gnum = gzr * z
+                    gnum = gnum if rgb else zero
+                    zsub = gzr if rsw >= wsum_min else zero
+                    gw0 = gnum * iz0 - zsub
+                    gw1 = gnum * iz1 - zsub
+                    gw2 = gnum * iz2 - zsub
+                    # the clamp passes the gradient on [0, 1] (as torch.clamp does)
+                    gw0 = gw0 if (w0 >= zero) & (w0 <= one) else zero
+                    gw1 = gw1 if (w1 >= zero) & (w1 <= one) else zero
+                    gw2 = gw2 if (w2 >= zero) & (w2 <= one) else zero
+                    acc[6 * LANES + lane] += gw0 * px
+                    acc[7 * LANES + lane] += gw1 * px
+                    acc[8 * LANES + lane] += gw2 * px
+                    acc[9 * LANES + lane] += gw0 * py
+                    acc[10 * LANES + lane] += gw1 * py
+                    acc[11 * LANES + lane] += gw2 * py
+                    acc[12 * LANES + lane] += gw0
+                    acc[13 * LANES + lane] += gw1
+                    acc[14 * LANES + lane] += gw2
+                    acc[15 * LANES + lane] += gnum * wc0
+                    acc[16 * LANES + lane] += gnum * wc1
+                    acc[17 * LANES + lane] += gnum * wc2
+                    acc[18 * LANES + lane] += a0 * wf
+                    acc[19 * LANES + lane] += a1 * wf
+                    acc[20 * LANES + lane] += a2 * wf
         for j in range(6):
-            grad[entry, j] = _lane_sum(ac[j * SW:], m)
+            grad[entry, j] = _lane_sum(acc[j * LANES:], LANES)
         for k in range(3):  # barycentric matrix row k: (x, y, 1) coefficients
-            grad[entry, 6 + 3 * k] = _lane_dot(ac[(6 + k) * SW:], pxa, m)
-            grad[entry, 7 + 3 * k] = _lane_sum(ac[(9 + k) * SW:], m)
-            grad[entry, 8 + 3 * k] = _lane_sum(ac[(6 + k) * SW:], m)
+            grad[entry, 6 + 3 * k] = _lane_sum(acc[(6 + k) * LANES:], LANES)
+            grad[entry, 7 + 3 * k] = _lane_sum(acc[(9 + k) * LANES:], LANES)
+            grad[entry, 8 + 3 * k] = _lane_sum(acc[(12 + k) * LANES:], LANES)
         for j in range(6):
-            grad[entry, 15 + j] = _lane_sum(ac[(12 + j) * SW:], m)
+            grad[entry, 15 + j] = _lane_sum(acc[(15 + j) * LANES:], LANES)
 
 
 @njit(parallel=True, **JIT_OPTS)
