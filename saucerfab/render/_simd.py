@@ -191,3 +191,58 @@ def _vexp_impl(x):  # type: ignore[no-untyped-def]
 
         return exp64
     return None
+
+
+# --------------------------------------------------------------------------- 8-lane copies
+#
+# Copying a short run of floats between arrays in a loop costs LLVM's loop
+# vectorizer a run-time overlap check, a trip-count check and a remainder
+# loop per copy (numba runs no SLP vectorizer that would merge a written-out
+# copy): more than the copy. These move exactly 8 elements as one vector.
+
+
+def _vec_ptr(context, builder, aryty, ary, offset):  # type: ignore[no-untyped-def]
+    """(pointer to element ``offset`` of the array as a pointer to 8 elements, their vector type)."""
+    arr = context.make_array(aryty)(context, builder, ary)
+    vty = ir.VectorType(context.get_data_type(aryty.dtype), 8)
+    return builder.bitcast(builder.gep(arr.data, [offset]), vty.as_pointer()), vty
+
+
+@intrinsic
+def copy8(typingctx, dst, doff, src, soff):  # type: ignore[no-untyped-def]
+    """``dst[doff:doff + 8] = src[soff:soff + 8]`` as one unaligned vector load and store.
+
+    ``dst`` and ``src``: contiguous 1-D arrays of one float dtype; ``doff``,
+    ``soff``: element offsets. No bounds or negative-index handling: the caller
+    keeps both runs inside their arrays.
+    """
+    if not (isinstance(dst, types.Array) and isinstance(src, types.Array) and dst.dtype == src.dtype
+            and dst.ndim == 1 and src.ndim == 1 and dst.layout == "C" and src.layout == "C"):
+        return None
+    sig = types.void(dst, types.intp, src, types.intp)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        sptr, vty = _vec_ptr(context, builder, sig.args[2], args[2], args[3])
+        dptr, _ = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
+        builder.store(builder.load(sptr, align=1), dptr, align=1)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def fill8(typingctx, dst, doff, value):  # type: ignore[no-untyped-def]
+    """``dst[doff:doff + 8] = value`` as one unaligned vector store (as :func:`copy8`)."""
+    if not (isinstance(dst, types.Array) and dst.ndim == 1 and dst.layout == "C" and value == dst.dtype):
+        return None
+    sig = types.void(dst, types.intp, dst.dtype)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        dptr, vty = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
+        vec = ir.Constant(vty, ir.Undefined)
+        for k in range(8):
+            vec = builder.insert_element(vec, args[2], ir.Constant(ir.IntType(32), k))
+        builder.store(vec, dptr, align=1)
+        return context.get_dummy_value()
+
+    return sig, codegen

@@ -28,7 +28,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from saucerfab.render._simd import ftz_on, ftz_restore, vexp
+from saucerfab.render._simd import copy8, fill8, ftz_on, ftz_restore, vexp
 from saucerfab.render.soft_common import SoftParams, WSUM_EPS
 from saucerfab.render.soft_tiles import JIT_OPTS, LANES, N_GRAD, NLOC, SW, TILE_H, TILE_W
 
@@ -285,19 +285,48 @@ def _lane_sum(a, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
     return tot
 
 
-@njit(**JIT_OPTS, **_INLINE)
-def _copy_group(dst, src, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
-    """``dst[:m] = src[:m]``, ``m = min(n, LANES)``: a loop of at most LANES iterations,
-    which LLVM vectorizes LANES wide (numba runs no SLP vectorizer, so a written-out
-    copy would stay scalar)."""
-    for k in range(min(n, LANES)):
-        dst[k] = src[k]
+@njit(parallel=True, **JIT_OPTS)
+def backward_state(image, g_image, g_alpha, st_m, st_s, st_p, wp, K):  # type: ignore[no-untyped-def] # pragma: no cover
+    """What the backward reads of each pixel, from the forward's state and the incoming gradients.
+
+    Returns ``(bst, wq)``: ``bst`` holds, row by row of the padded image (the
+    forward's ``hp x wp``), 6 fields of ``wq = wp + LANES`` pixels each (field j of
+    pixel (r, c) at ``(6 r + j) wq + c``; a tile's rows stay together in memory,
+    and a lane group starting at any pixel stays inside its row): 0 the softmax
+    maximum, 1-3 dL/dimage_k / sum, 4 sum_k dL/dimage_k image_k / sum,
+    5 dL/dalpha prod(1 - D); 0 outside the image. One vectorized pass over rows.
+    """
+    size = image.shape[0]
+    hp = st_m.shape[0] // wp
+    wq = wp + LANES
+    zero, one = K[K_ZERO], K[K_ONE]
+    out = np.empty(6 * wq * hp, K.dtype)
+    gi = g_image.reshape(-1)
+    im = image.reshape(-1)
+    ga = g_alpha.reshape(-1)
+    for band in prange(hp // TILE_H):
+        for r in range(band * TILE_H, band * TILE_H + TILE_H):
+            o = out[6 * wq * r:]
+            w = size if r < size else 0
+            if r < size:
+                gir, imr, gar = gi[3 * size * r:], im[3 * size * r:], ga[size * r:]
+                mr, sr, pr = st_m[r * wp:], st_s[r * wp:], st_p[r * wp:]
+                for c in range(size):
+                    rs = one / sr[c]
+                    a0, a1, a2 = gir[3 * c] * rs, gir[3 * c + 1] * rs, gir[3 * c + 2] * rs
+                    o[c] = mr[c]
+                    o[wq + c], o[2 * wq + c], o[3 * wq + c] = a0, a1, a2
+                    o[4 * wq + c] = a0 * imr[3 * c] + a1 * imr[3 * c + 1] + a2 * imr[3 * c + 2]
+                    o[5 * wq + c] = gar[c] * pr[c]
+            for j in range(6):
+                o[j * wq + w:(j + 1) * wq] = zero
+    return out, wq
 
 
 @njit(**JIT_OPTS)
 def _backward_tile(
     t, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab, K,
-    image, g_image, g_alpha, st_m, st_s, st_p, row_lo, row_hi, grad,
+    bst, wq, row_lo, row_hi, grad,
 ):  # type: ignore[no-untyped-def] # pragma: no cover - jit
     """Gradients of tile ``t``'s pixels into the slots ``grad[entry]`` of its entries."""
     ty, tx = t // n_tx, t % n_tx
@@ -306,25 +335,11 @@ def _backward_tile(
     two = one + one
     thr, inv_sigma, near, far = K[K_THR], K[K_INV_SIGMA], K[K_NEAR], K[K_FAR]
     inv_fr, inv_gamma, wsum_min, ee_min = K[K_INV_FR], K[K_INV_GAMMA], K[K_WSUM], K[K_EE_MIN]
-    # fields (layout as in _forward_tile): 0 the softmax maximum, 1-3 dL/dimage / sum,
-    # 4 sum_k dL/dimage_k image_k / sum, 5 dL/dalpha * prod(1 - D)
-    st = np.zeros(6 * NLOC, K.dtype)
-    for r in range(rt0, min(rt0 + TILE_H, size)):
-        for c in range(ct0, min(ct0 + TILE_W, size)):
-            q = (r - rt0) * SW + (c - ct0)
-            g = r * wp + c
-            rs = one / st_s[g]
-            a0, a1, a2 = g_image[r, c, 0] * rs, g_image[r, c, 1] * rs, g_image[r, c, 2] * rs
-            st[q] = st_m[g]
-            st[NLOC + q], st[2 * NLOC + q], st[3 * NLOC + q] = a0, a1, a2
-            st[4 * NLOC + q] = a0 * image[r, c, 0] + a1 * image[r, c, 1] + a2 * image[r, c, 2]
-            st[5 * NLOC + q] = g_alpha[r, c] * st_p[g]
-
     # The pairs of one entry are packed row after row into a flat scratch (the
     # forward's lo..hi of each row: a convex region meets a row in one run), so
     # the lane groups are full whatever the rows' spans (at sigma 1e-7 they are
     # 1-4 pixels: one group per entry instead of one per row). Scratch fields
-    # (NSCR apart): 0 px, 1 py, then the 6 tile-state fields of the pixel.
+    # (NSCR apart): 0 px, 1 py, then the pixel's 6 fields of :func:`backward_state`.
     scr = np.zeros(8 * NSCR, K.dtype)
     # Gradient accumulators, one per lane of a group, summed over the entry's
     # groups in order and reduced once per entry: slots 0-5 corner x, y;
@@ -343,20 +358,16 @@ def _backward_tile(
                 if hi < lo:
                     continue  # every pair of this row is skipped
                 py = py_tab[r]
-                src = st[(r - rt0) * SW + (ca + lo - ct0):]
-                pxs = px_tab[ca + lo:]
-                dst = scr[total:]
-                # whole lane groups (constant length: LLVM copies them as vectors); the
-                # lanes past hi stay within the row's padding and are overwritten by the
-                # next row or lie past the entry's total
-                ng = (hi - lo + LANES) // LANES * LANES
-                for g0 in range(0, ng, LANES):
-                    _copy_group(dst[g0:], pxs[g0:], ng - g0)
-                    dpy = dst[NSCR + g0:]
-                    for k in range(min(ng - g0, LANES)):
-                        dpy[k] = py
+                # whole groups of 8 lanes, moved as vectors (copy8); the lanes past hi
+                # (the row's next pixels, or its padding) are overwritten by the next
+                # row or lie past the entry's total
+                o = 6 * wq * r + ca + lo
+                for g0 in range(0, hi - lo + 1, 8):
+                    d = total + g0
+                    copy8(scr, d, px_tab, ca + lo + g0)
+                    fill8(scr, NSCR + d, py)
                     for j in range(6):
-                        _copy_group(dst[(2 + j) * NSCR + g0:], src[j * NLOC + g0:], ng - g0)
+                        copy8(scr, (2 + j) * NSCR + d, bst, o + j * wq + g0)
                 total += hi - lo + 1
         if total > 0:
             (ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2,
@@ -463,7 +474,7 @@ def _backward_tile(
 @njit(parallel=True, **JIT_OPTS)
 def backward(
     order, n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col, px_tab, py_tab,
-    K, image, g_image, g_alpha, st_m, st_s, st_p, row_lo, row_hi, grad,
+    K, bst, wq, row_lo, row_hi, grad,
 ):  # type: ignore[no-untyped-def] # pragma: no cover - jit
     """The gradient slots ``grad`` (E, N_GRAD) of every tile entry (:func:`_backward_tile`);
     run under :func:`saucerfab.render.soft_tiles.one_tile_chunks`."""
@@ -471,6 +482,6 @@ def backward(
         old = ftz_on()
         _backward_tile(
             order[k], n_tx, size, wp, tile_start, tile_entry, entry_face, row_start, box, cxy, inv, iz, col,
-            px_tab, py_tab, K, image, g_image, g_alpha, st_m, st_s, st_p, row_lo, row_hi, grad,
+            px_tab, py_tab, K, bst, wq, row_lo, row_hi, grad,
         )
         ftz_restore(old)

@@ -176,10 +176,11 @@ def _make_function():  # type: ignore[no-untyped-def]
             ga = np.zeros(image.shape[:2], dtype) if g_alpha is None else _numpy(g_alpha.to(ctx.torch_dtype))
             grad = np.empty((bins.tile_entry.shape[0], N_GRAD), dtype)
             with one_tile_chunks():
+                bst, wq = soft_kernels.backward_state(image, gi, ga, st_m, st_s, st_p, bins.wp, K)
                 soft_kernels.backward(
                     bins.order, bins.n_tx, cfg.size, bins.wp, bins.tile_start, bins.tile_entry, bins.entry_face,
                     bins.row_start, bins.box, cxy, inv, iz, a_col, bins.px_tab, bins.py_tab, K,
-                    image, gi, ga, st_m, st_s, st_p, row_lo, row_hi, grad,
+                    bst, wq, row_lo, row_hi, grad,
                 )
             n_faces = cxy.shape[0]
             g_corner = np.empty((n_faces, 9), dtype)
