@@ -246,3 +246,32 @@ def fill8(typingctx, dst, doff, value):  # type: ignore[no-untyped-def]
         return context.get_dummy_value()
 
     return sig, codegen
+
+
+@intrinsic
+def blend8(typingctx, dst, doff, src, soff, n):  # type: ignore[no-untyped-def]
+    """``dst[doff:doff + m] = src[soff:soff + m]``, ``m = min(n, 8)``: 8 lanes of each
+    loaded, the first m taken from ``src``, all 8 stored back (as :func:`copy8`;
+    ``dst[doff + m:doff + 8]`` is rewritten with its own values, so no other
+    thread may write there meanwhile)."""
+    if not (isinstance(dst, types.Array) and isinstance(src, types.Array) and dst.dtype == src.dtype
+            and dst.ndim == 1 and src.ndim == 1 and dst.layout == "C" and src.layout == "C"
+            and isinstance(n, types.Integer)):
+        return None
+    sig = types.void(dst, types.intp, src, types.intp, types.intp)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        sptr, vty = _vec_ptr(context, builder, sig.args[2], args[2], args[3])
+        dptr, _ = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
+        i64 = ir.IntType(64)
+        lanes = ir.Constant(ir.VectorType(i64, 8), [ir.Constant(i64, k) for k in range(8)])
+        splat = ir.Constant(ir.VectorType(i64, 8), ir.Undefined)
+        for k in range(8):
+            splat = builder.insert_element(splat, args[4], ir.Constant(ir.IntType(32), k))
+        take = builder.icmp_signed("<", lanes, splat)
+        new = builder.load(sptr, align=1)
+        old = builder.load(dptr, align=1)
+        builder.store(builder.select(take, new, old), dptr, align=1)
+        return context.get_dummy_value()
+
+    return sig, codegen

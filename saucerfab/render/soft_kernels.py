@@ -28,7 +28,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from saucerfab.render._simd import copy8, fill8, ftz_on, ftz_restore, vexp
+from saucerfab.render._simd import blend8, copy8, fill8, ftz_on, ftz_restore, vexp
 from saucerfab.render.soft_common import SoftParams, WSUM_EPS
 from saucerfab.render.soft_tiles import JIT_OPTS, LANES, N_GRAD, NLOC, SW, TILE_H, TILE_W
 
@@ -171,77 +171,100 @@ def _forward_tile(
         st[4 * NLOC + q] = K[K_BG + 2] * K[K_SUM0]
         st[5 * NLOC + q] = one
 
+    # The pairs of one entry (its box's rows cut to the tile) are packed row after
+    # row into a flat scratch, rendered in full lane groups, and their state
+    # written back: small faces' rows (1-4 pixels at sigma 1e-7) no longer take a
+    # lane group each. Scratch fields (NSCR apart): 0 px, 1 py, 2-7 the tile
+    # state's 6 fields, 8 whether the pair is kept (for the rows' lo and hi).
+    scr = np.zeros(9 * NSCR, K.dtype)
     for idx in range(tile_start[t], tile_start[t + 1]):
         entry = tile_entry[idx]
         f, ra, rb, ca, cbx = _entry_span(entry, entry_face, box, rt0, ct0)
         if rb < ra or cbx < ca:
             continue
+        w = cbx - ca + 1
+        total = 0
+        for r in range(ra, rb + 1):
+            q0 = (r - rt0) * SW + (ca - ct0)
+            py = py_tab[r]
+            # whole 8-lane vector copies: the lanes past the box lie in the row's
+            # padding and land where the next row's copy or nothing reads them
+            for g0 in range(0, w, 8):
+                d = total + g0
+                copy8(scr, d, px_tab, ca + g0)
+                fill8(scr, NSCR + d, py)
+                for j in range(6):
+                    copy8(scr, (2 + j) * NSCR + d, st, j * NLOC + q0 + g0)
+            total += w
         (ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2,
          i00, i01, i02, i10, i11, i12, i20, i21, i22, iz0, iz1, iz2, fr, fg, fb) = _face_consts(
             f, cxy, inv, iz, col, ee_min, one
         )
-        # whole lane groups: a fixed-width loop without remainder; lanes past
-        # the box (the last group's tail) are masked out like skipped pairs
-        span = np.int32(cbx - ca + 1)
-        n = (cbx - ca + LANES) // LANES * LANES
-        n32, m32 = np.int32(n), np.int32(-1)
-        pxv = px_tab[ca:]
+        n = (total + LANES - 1) // LANES * LANES
+        t32 = np.int32(total)
+        # one lane group at a time, each a loop of at most LANES iterations: LLVM
+        # then vectorizes it LANES wide (for a loop of unknown length it picks
+        # 16 lanes on AVX-512 and runs an 8-lane group in its 4-lane epilogue);
+        # lanes past the total hold stale scratch and are masked out
+        for g0 in range(0, n, LANES):
+            # a view indexed by the loop counter plus constants: no negative-index
+            # wraparound, so LLVM sees unit-stride accesses and vectorizes
+            sv = scr[g0:]
+            g32 = np.int32(g0)
+            for lane in range(min(n - g0, LANES)):
+                px = sv[lane]
+                py = sv[NSCR + lane]
+                b0 = i01 * py + i02
+                b1 = i11 * py + i12
+                b2 = i21 * py + i22
+                hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
+                w0, w1, w2, inside = _bary(px, i00, i10, i20, b0, b1, b2, zero, one)
+                # squared distance to the closed triangle = nearest of the three segments
+                d2 = _segment(px, hy0, ax0, ex0, ey0, ie0, zero, one)[3]
+                d2 = min(d2, _segment(px, hy1, ax1, ex1, ey1, ie1, zero, one)[3])
+                d2 = min(d2, _segment(px, hy2, ax2, ex2, ey2, ie2, zero, one)[3])
+                # int32 lane numbers: 64-bit ones would halve the vector width
+                valid = (inside | (d2 < thr)) & (np.int32(lane) + g32 < t32)
+                sv[8 * NSCR + lane] = one if valid else zero
+                xs = (d2 if inside else -d2) * inv_sigma
+                cov, unc = _coverage(xs, zero, one)
+                sv[7 * NSCR + lane] = sv[7 * NSCR + lane] * (unc if valid else one)
+                # perspective-correct depth from the clipped barycentrics
+                wc0, wc1, wc2 = _clip01(w0, w1, w2, zero, one)
+                sw = max(wc0 + wc1 + wc2, wsum_min)
+                z = sw / (wc0 * iz0 + wc1 * iz1 + wc2 * iz2)
+                rgb = valid & (z >= near) & (z <= far)
+                zn = (far - z) * inv_fr
+                # online softmax with SoftRas's running maximum, one exp per pair
+                mo = sv[2 * NSCR + lane]
+                dz = zn - mo
+                e = vexp(-abs(dz) * inv_gamma)
+                newmax = rgb & (dz > zero)
+                scale = e if newmax else one
+                term = (one if newmax else e) * cov
+                term = term if rgb else zero
+                sv[2 * NSCR + lane] = zn if newmax else mo
+                sv[3 * NSCR + lane] = sv[3 * NSCR + lane] * scale + term
+                sv[4 * NSCR + lane] = sv[4 * NSCR + lane] * scale + term * fr
+                sv[5 * NSCR + lane] = sv[5 * NSCR + lane] * scale + term * fg
+                sv[6 * NSCR + lane] = sv[6 * NSCR + lane] * scale + term * fb
+        # write the state back (exactly the box's lanes of each row) and record,
+        # per row, the first and last kept lane: all the backward has to visit
+        total = 0
         rs = row_start[entry] - ra
         for r in range(ra, rb + 1):
-            py = py_tab[r]
-            b0 = i01 * py + i02
-            b1 = i11 * py + i12
-            b2 = i21 * py + i22
-            hy0, hy1, hy2 = py - ay0, py - ay1, py - ay2
-            lo, hi = n32, m32
-            # one lane group at a time, each a loop of at most LANES iterations: LLVM
-            # then vectorizes it LANES wide (for a loop of unknown length it picks
-            # 16 lanes on AVX-512 and runs an 8-lane group in its 4-lane epilogue)
-            for g0 in range(0, n, LANES):
-                # views indexed by the loop counter plus constants: no negative-index
-                # wraparound, so LLVM sees unit-stride accesses and vectorizes
-                sv = st[(r - rt0) * SW + (ca - ct0) + g0:]
-                pxg = pxv[g0:]
-                g32 = np.int32(g0)
-                glo, ghi = n32, m32
-                for lane in range(min(n - g0, LANES)):
-                    px = pxg[lane]
-                    w0, w1, w2, inside = _bary(px, i00, i10, i20, b0, b1, b2, zero, one)
-                    # squared distance to the closed triangle = nearest of the three segments
-                    d2 = _segment(px, hy0, ax0, ex0, ey0, ie0, zero, one)[3]
-                    d2 = min(d2, _segment(px, hy1, ax1, ex1, ey1, ie1, zero, one)[3])
-                    d2 = min(d2, _segment(px, hy2, ax2, ex2, ey2, ie2, zero, one)[3])
-                    # int32 lane numbers: 64-bit ones would halve the vector width
-                    l32 = np.int32(lane) + g32
-                    valid = (inside | (d2 < thr)) & (l32 < span)
-                    glo = min(glo, l32 if valid else n32)
-                    ghi = max(ghi, l32 if valid else m32)
-                    xs = (d2 if inside else -d2) * inv_sigma
-                    cov, unc = _coverage(xs, zero, one)
-                    sv[5 * NLOC + lane] = sv[5 * NLOC + lane] * (unc if valid else one)
-                    # perspective-correct depth from the clipped barycentrics
-                    wc0, wc1, wc2 = _clip01(w0, w1, w2, zero, one)
-                    sw = max(wc0 + wc1 + wc2, wsum_min)
-                    z = sw / (wc0 * iz0 + wc1 * iz1 + wc2 * iz2)
-                    rgb = valid & (z >= near) & (z <= far)
-                    zn = (far - z) * inv_fr
-                    # online softmax with SoftRas's running maximum, one exp per pair
-                    mo = sv[lane]
-                    dz = zn - mo
-                    e = vexp(-abs(dz) * inv_gamma)
-                    newmax = rgb & (dz > zero)
-                    scale = e if newmax else one
-                    term = (one if newmax else e) * cov
-                    term = term if rgb else zero
-                    sv[lane] = zn if newmax else mo
-                    sv[NLOC + lane] = sv[NLOC + lane] * scale + term
-                    sv[2 * NLOC + lane] = sv[2 * NLOC + lane] * scale + term * fr
-                    sv[3 * NLOC + lane] = sv[3 * NLOC + lane] * scale + term * fg
-                    sv[4 * NLOC + lane] = sv[4 * NLOC + lane] * scale + term * fb
-                lo, hi = min(lo, glo), max(hi, ghi)
-            # the backward needs only the lanes from lo to hi of this row
+            q0 = (r - rt0) * SW + (ca - ct0)
+            for g0 in range(0, w, 8):
+                for j in range(6):
+                    blend8(st, j * NLOC + q0 + g0, scr, (2 + j) * NSCR + total + g0, w - g0)
+            lo, hi = w, -1
+            for k in range(w):
+                if scr[8 * NSCR + total + k] != zero:
+                    lo = min(lo, k)
+                    hi = k
             row_lo[rs + r] = lo
             row_hi[rs + r] = hi
+            total += w
 
     for r in range(rt0, min(rt0 + TILE_H, size)):
         for c in range(ct0, min(ct0 + TILE_W, size)):
