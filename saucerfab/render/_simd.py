@@ -275,3 +275,31 @@ def blend8(typingctx, dst, doff, src, soff, n):  # type: ignore[no-untyped-def]
         return context.get_dummy_value()
 
     return sig, codegen
+
+
+@intrinsic
+def nonzero_mask8(typingctx, src, off, n):  # type: ignore[no-untyped-def]
+    """Bit k set where k < min(n, 8) and ``src[off + k] != 0``: one vector compare
+    instead of a loop with a branch per lane (as :func:`copy8`: no bounds handling)."""
+    if not (isinstance(src, types.Array) and src.ndim == 1 and src.layout == "C"
+            and isinstance(src.dtype, types.Float) and isinstance(n, types.Integer)):
+        return None
+    sig = types.int64(src, types.intp, types.intp)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        sptr, vty = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
+        i64 = ir.IntType(64)
+        lanes = ir.Constant(ir.VectorType(i64, 8), [ir.Constant(i64, k) for k in range(8)])
+        splat = ir.Constant(ir.VectorType(i64, 8), ir.Undefined)
+        for k in range(8):
+            splat = builder.insert_element(splat, args[2], ir.Constant(ir.IntType(32), k))
+        within = builder.icmp_signed("<", lanes, splat)
+        nonzero = builder.fcmp_unordered("!=", builder.load(sptr, align=1), ir.Constant(vty, None))
+        return builder.zext(builder.bitcast(builder.and_(within, nonzero), ir.IntType(8)), i64)
+
+    return sig, codegen
+
+
+#: first and last set bit of each 8-bit mask (32 and -1 for none)
+FIRST_BIT = np.array([next((k for k in range(8) if m >> k & 1), 32) for m in range(256)], np.int64)
+LAST_BIT = np.array([max((k for k in range(8) if m >> k & 1), default=-1) for m in range(256)], np.int64)

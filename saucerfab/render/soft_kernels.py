@@ -28,7 +28,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from saucerfab.render._simd import blend8, copy8, fill8, ftz_on, ftz_restore, vexp
+from saucerfab.render._simd import (
+    FIRST_BIT, LAST_BIT, blend8, copy8, fill8, ftz_on, ftz_restore, nonzero_mask8, vexp,
+)
 from saucerfab.render.soft_common import SoftParams, WSUM_EPS
 from saucerfab.render.soft_tiles import JIT_OPTS, LANES, N_GRAD, NLOC, SW, TILE_H, TILE_W
 
@@ -258,10 +260,11 @@ def _forward_tile(
                 for j in range(6):
                     blend8(st, j * NLOC + q0 + g0, scr, (2 + j) * NSCR + total + g0, w - g0)
             lo, hi = w, -1
-            for k in range(w):
-                if scr[8 * NSCR + total + k] != zero:
-                    lo = min(lo, k)
-                    hi = k
+            for g0 in range(0, w, 8):
+                m = nonzero_mask8(scr, 8 * NSCR + total + g0, w - g0)
+                if m:
+                    lo = min(lo, g0 + FIRST_BIT[m])
+                    hi = g0 + LAST_BIT[m]
             row_lo[rs + r] = lo
             row_hi[rs + r] = hi
             total += w
