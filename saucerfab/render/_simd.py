@@ -303,3 +303,26 @@ def nonzero_mask8(typingctx, src, off, n):  # type: ignore[no-untyped-def]
 #: first and last set bit of each 8-bit mask (32 and -1 for none)
 FIRST_BIT = np.array([next((k for k in range(8) if m >> k & 1), 32) for m in range(256)], np.int64)
 LAST_BIT = np.array([max((k for k in range(8) if m >> k & 1), default=-1) for m in range(256)], np.int64)
+
+
+@intrinsic
+def sum8(typingctx, src, off):  # type: ignore[no-untyped-def]
+    """``src[off:off + 8].sum()`` as a fixed tree of vector adds, ((0+4) + (2+6)) + ((1+5)
+    + (3+7)): one load and three adds, the same order every call (as :func:`copy8`: no
+    bounds handling)."""
+    if not (isinstance(src, types.Array) and src.ndim == 1 and src.layout == "C"
+            and isinstance(src.dtype, types.Float)):
+        return None
+    sig = src.dtype(src, types.intp)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        sptr, vty = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
+        v = builder.load(sptr, align=1)
+        i32 = ir.IntType(32)
+        for width in (4, 2, 1):
+            lo = builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(i32, width), list(range(width))))
+            hi = builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(i32, width), list(range(width, 2 * width))))
+            v = builder.fadd(lo, hi)
+        return builder.extract_element(v, ir.Constant(i32, 0))
+
+    return sig, codegen

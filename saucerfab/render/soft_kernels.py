@@ -29,14 +29,17 @@ import numpy as np
 from numba import njit, prange
 
 from saucerfab.render._simd import (
-    FIRST_BIT, LAST_BIT, blend8, copy8, fill8, ftz_on, ftz_restore, nonzero_mask8, vexp,
+    FIRST_BIT, LAST_BIT, blend8, copy8, fill8, ftz_on, ftz_restore, nonzero_mask8, sum8, vexp,
 )
 from saucerfab.render.soft_common import SoftParams, WSUM_EPS
 from saucerfab.render.soft_tiles import JIT_OPTS, LANES, N_GRAD, NLOC, SW, TILE_H, TILE_W
 
-#: lanes of the backward's flat scratch per field: every pair of one entry, and room
+#: lanes of the kernels' flat scratch per field: every pair of one entry, and room
 #: for the last copied lane group
 NSCR = TILE_H * TILE_W + LANES
+# the 8-lane vector blocks of _simd (copy8, fill8, blend8, nonzero_mask8, sum8) move
+# one lane group each
+assert LANES == 8
 
 # index of each constant in the parameter vector K handed to the kernels
 K_THR, K_INV_SIGMA, K_NEAR, K_FAR, K_INV_FR, K_INV_GAMMA, K_EPS, K_SUM0, K_BG = 0, 1, 2, 3, 4, 5, 6, 7, 8
@@ -302,15 +305,6 @@ def forward(
 # --------------------------------------------------------------------------- backward
 
 
-@njit(error_model="numpy", cache=True, nogil=True, fastmath={"contract", "reassoc"})
-def _lane_sum(a, n):  # type: ignore[no-untyped-def] # pragma: no cover - jit
-    """sum(a[:n]); reassociation lets LLVM vectorize it (same code, same order: deterministic)."""
-    tot = a[0] - a[0]
-    for k in range(n):
-        tot += a[k]
-    return tot
-
-
 @njit(parallel=True, **JIT_OPTS)
 def backward_state(image, g_image, g_alpha, st_m, st_s, st_p, wp, K):  # type: ignore[no-untyped-def] # pragma: no cover
     """What the backward reads of each pixel, from the forward's state and the incoming gradients.
@@ -375,7 +369,8 @@ def _backward_tile(
     for idx in range(tile_start[t], tile_start[t + 1]):
         entry = tile_entry[idx]
         f, ra, rb, ca, cbx = _entry_span(entry, entry_face, box, rt0, ct0)
-        acc[:] = zero
+        for j in range(N_GRAD):
+            fill8(acc, j * LANES, zero)
         total = 0
         if rb >= ra and cbx >= ca:
             rs = row_start[entry] - ra
@@ -487,14 +482,15 @@ def _backward_tile(
                     acc[18 * LANES + lane] += a0 * wf
                     acc[19 * LANES + lane] += a1 * wf
                     acc[20 * LANES + lane] += a2 * wf
+        # each slot's 8 lanes summed in one fixed order (sum8)
         for j in range(6):
-            grad[entry, j] = _lane_sum(acc[j * LANES:], LANES)
+            grad[entry, j] = sum8(acc, j * LANES)
         for k in range(3):  # barycentric matrix row k: (x, y, 1) coefficients
-            grad[entry, 6 + 3 * k] = _lane_sum(acc[(6 + k) * LANES:], LANES)
-            grad[entry, 7 + 3 * k] = _lane_sum(acc[(9 + k) * LANES:], LANES)
-            grad[entry, 8 + 3 * k] = _lane_sum(acc[(12 + k) * LANES:], LANES)
+            grad[entry, 6 + 3 * k] = sum8(acc, (6 + k) * LANES)
+            grad[entry, 7 + 3 * k] = sum8(acc, (9 + k) * LANES)
+            grad[entry, 8 + 3 * k] = sum8(acc, (12 + k) * LANES)
         for j in range(6):
-            grad[entry, 15 + j] = _lane_sum(acc[(15 + j) * LANES:], LANES)
+            grad[entry, 15 + j] = sum8(acc, (15 + j) * LANES)
 
 
 @njit(parallel=True, **JIT_OPTS)
