@@ -305,11 +305,17 @@ def forward(
 # --------------------------------------------------------------------------- backward
 
 
+def backward_state_size(hp: int, wp: int) -> int:
+    """Elements of the buffer :func:`backward_state` fills for a padded ``hp x wp`` image."""
+    return 6 * (wp + LANES) * hp
+
+
 @njit(parallel=True, **JIT_OPTS)
-def backward_state(image, g_image, g_alpha, st_m, st_s, st_p, wp, K):  # type: ignore[no-untyped-def] # pragma: no cover
+def backward_state(image, g_image, g_alpha, st_m, st_s, st_p, wp, K, out):  # type: ignore[no-untyped-def] # pragma: no cover
     """What the backward reads of each pixel, from the forward's state and the incoming gradients.
 
-    Returns ``(bst, wq)``: ``bst`` holds, row by row of the padded image (the
+    Fills ``out`` (at least :func:`backward_state_size` elements) and returns
+    ``(bst, wq)``: ``bst``, its start, holds, row by row of the padded image (the
     forward's ``hp x wp``), 6 fields of ``wq = wp + LANES`` pixels each (field j of
     pixel (r, c) at ``(6 r + j) wq + c``; a tile's rows stay together in memory,
     and a lane group starting at any pixel stays inside its row): 0 the softmax
@@ -320,7 +326,7 @@ def backward_state(image, g_image, g_alpha, st_m, st_s, st_p, wp, K):  # type: i
     hp = st_m.shape[0] // wp
     wq = wp + LANES
     zero, one = K[K_ZERO], K[K_ONE]
-    out = np.empty(6 * wq * hp, K.dtype)
+    out = out[:6 * wq * hp]
     gi = g_image.reshape(-1)
     im = image.reshape(-1)
     ga = g_alpha.reshape(-1)
