@@ -11,6 +11,14 @@ returns 0 below the smallest normal result, so it never makes denormals.
 flush-to-zero and denormals-are-zero bits of the calling thread (no-ops on
 other CPUs): tiny products such as ``prod (1 - D)`` deep inside many faces
 would otherwise fall into denormals, which cost about a hundred cycles each.
+
+:func:`copy8`, :func:`fill8`, :func:`blend8`, :func:`nonzero_mask8` and
+:func:`sum8` move, fill, merge, test and sum exactly 8 contiguous elements as
+one LLVM vector (unaligned loads and stores): the kernels pack short pixel
+runs with them, where a loop would cost LLVM's run-time overlap and length
+checks per run (numba runs no SLP vectorizer to merge written-out copies).
+They do no bounds checking; the callers keep every 8-lane run inside its
+array (padding).
 """
 
 from __future__ import annotations

@@ -4,19 +4,27 @@ The formulas are :mod:`saucerfab.render.soft`'s; the tiles, their state
 layout and the binning are :mod:`saucerfab.render.soft_tiles`'s; the per-face
 setup and the autograd glue are :mod:`saucerfab.render.soft_numba`'s.
 
-* The innermost loop runs over the pixels of one row of a face's box in whole
-  groups of ``LANES``, branch-free (selects and masks; lanes past the box are
-  masked out like skipped pairs), indexing one tile-local state array through
-  a view with compile-time field offsets, and uses
-  :func:`saucerfab.render._simd.vexp` instead of libm's exp: LLVM vectorizes it
-  (AVX2: 8 float32 / 4 float64 lanes). The per-pair pieces that both
-  directions compute (barycentrics, nearest edge point, coverage) are small
-  functions numba inlines into the loop (``inline="always"``), so the loop
-  LLVM sees is the same as if they were written out.
+* Each (face, tile) entry's pairs are packed into a flat tile-local scratch,
+  row after row (the forward: the box's rows cut to the tile; the backward:
+  each row's first to last kept pair, which the forward records), with the
+  8-lane vector copies of :mod:`saucerfab.render._simd`; the pairs are then
+  rendered in full groups of ``LANES`` and the forward's state is blended
+  back. A face's rows are short (1-4 pixels at sigma 1e-7, 5-9 at 1e-5), and a
+  group per row left most lanes idle.
+* The innermost loop runs over one lane group at a time (a loop of at most
+  LANES iterations, which LLVM vectorizes exactly LANES wide), branch-free
+  (selects and masks; lanes past the entry's pairs are masked out like
+  skipped pairs), indexing the scratch through a view with compile-time field
+  offsets, and uses :func:`saucerfab.render._simd.vexp` instead of libm's
+  exp. The per-pair pieces that both directions compute (barycentrics,
+  nearest edge point, coverage) are small functions numba inlines into the
+  loop (``inline="always"``), so the loop LLVM sees is the same as if they
+  were written out.
 * The forward keeps per pixel the softmax maximum and sum and the alpha
   product, and per (entry, row) the first and last lane whose pair is not
   skipped; the backward recomputes each pair's geometry on those lanes only
-  (cheaper than storing millions of pairs).
+  (cheaper than storing millions of pairs), reading each pixel's state from
+  one full-image array that :func:`backward_state` fills in a single pass.
 * float32 denormals are flushed to zero on the worker threads while they
   render a tile (MXCSR restored afterwards).
 """
