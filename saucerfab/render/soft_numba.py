@@ -169,6 +169,11 @@ def _scratch(name: str, size: int, dtype: np.dtype) -> np.ndarray:
     return buf
 
 
+def scratch_nbytes() -> int:
+    """Bytes this thread's reused backward buffers (:func:`_scratch`) hold now."""
+    return sum(b.nbytes for b in getattr(_SCRATCH, "bufs", {}).values())
+
+
 def _numpy(t: "torch.Tensor") -> np.ndarray:
     return t.detach().contiguous().numpy()
 
