@@ -11,6 +11,14 @@ returns 0 below the smallest normal result, so it never makes denormals.
 flush-to-zero and denormals-are-zero bits of the calling thread (no-ops on
 other CPUs): tiny products such as ``prod (1 - D)`` deep inside many faces
 would otherwise fall into denormals, which cost about a hundred cycles each.
+
+:func:`copy8`, :func:`fill8`, :func:`blend8`, :func:`nonzero_mask8` and
+:func:`sum8` move, fill, merge, test and sum exactly 8 contiguous elements as
+one LLVM vector (unaligned loads and stores): the kernels pack short pixel
+runs with them, where a loop would cost LLVM's run-time overlap and length
+checks per run (numba runs no SLP vectorizer to merge written-out copies).
+They do no bounds checking; the callers keep every 8-lane run inside its
+array (padding).
 """
 
 from __future__ import annotations
@@ -191,3 +199,138 @@ def _vexp_impl(x):  # type: ignore[no-untyped-def]
 
         return exp64
     return None
+
+
+# --------------------------------------------------------------------------- 8-lane copies
+#
+# Copying a short run of floats between arrays in a loop costs LLVM's loop
+# vectorizer a run-time overlap check, a trip-count check and a remainder
+# loop per copy (numba runs no SLP vectorizer that would merge a written-out
+# copy): more than the copy. These move exactly 8 elements as one vector.
+
+
+def _vec_ptr(context, builder, aryty, ary, offset):  # type: ignore[no-untyped-def]
+    """(pointer to element ``offset`` of the array as a pointer to 8 elements, their vector type)."""
+    arr = context.make_array(aryty)(context, builder, ary)
+    vty = ir.VectorType(context.get_data_type(aryty.dtype), 8)
+    return builder.bitcast(builder.gep(arr.data, [offset]), vty.as_pointer()), vty
+
+
+@intrinsic
+def copy8(typingctx, dst, doff, src, soff):  # type: ignore[no-untyped-def]
+    """``dst[doff:doff + 8] = src[soff:soff + 8]`` as one unaligned vector load and store.
+
+    ``dst`` and ``src``: contiguous 1-D arrays of one float dtype; ``doff``,
+    ``soff``: element offsets. No bounds or negative-index handling: the caller
+    keeps both runs inside their arrays.
+    """
+    if not (isinstance(dst, types.Array) and isinstance(src, types.Array) and dst.dtype == src.dtype
+            and dst.ndim == 1 and src.ndim == 1 and dst.layout == "C" and src.layout == "C"):
+        return None
+    sig = types.void(dst, types.intp, src, types.intp)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        sptr, vty = _vec_ptr(context, builder, sig.args[2], args[2], args[3])
+        dptr, _ = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
+        builder.store(builder.load(sptr, align=1), dptr, align=1)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def fill8(typingctx, dst, doff, value):  # type: ignore[no-untyped-def]
+    """``dst[doff:doff + 8] = value`` as one unaligned vector store (as :func:`copy8`)."""
+    if not (isinstance(dst, types.Array) and dst.ndim == 1 and dst.layout == "C" and value == dst.dtype):
+        return None
+    sig = types.void(dst, types.intp, dst.dtype)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        dptr, vty = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
+        vec = ir.Constant(vty, ir.Undefined)
+        for k in range(8):
+            vec = builder.insert_element(vec, args[2], ir.Constant(ir.IntType(32), k))
+        builder.store(vec, dptr, align=1)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def blend8(typingctx, dst, doff, src, soff, n):  # type: ignore[no-untyped-def]
+    """``dst[doff:doff + m] = src[soff:soff + m]``, ``m = min(n, 8)``: 8 lanes of each
+    loaded, the first m taken from ``src``, all 8 stored back (as :func:`copy8`;
+    ``dst[doff + m:doff + 8]`` is rewritten with its own values, so no other
+    thread may write there meanwhile)."""
+    if not (isinstance(dst, types.Array) and isinstance(src, types.Array) and dst.dtype == src.dtype
+            and dst.ndim == 1 and src.ndim == 1 and dst.layout == "C" and src.layout == "C"
+            and isinstance(n, types.Integer)):
+        return None
+    sig = types.void(dst, types.intp, src, types.intp, types.intp)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        sptr, vty = _vec_ptr(context, builder, sig.args[2], args[2], args[3])
+        dptr, _ = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
+        i64 = ir.IntType(64)
+        lanes = ir.Constant(ir.VectorType(i64, 8), [ir.Constant(i64, k) for k in range(8)])
+        splat = ir.Constant(ir.VectorType(i64, 8), ir.Undefined)
+        for k in range(8):
+            splat = builder.insert_element(splat, args[4], ir.Constant(ir.IntType(32), k))
+        take = builder.icmp_signed("<", lanes, splat)
+        new = builder.load(sptr, align=1)
+        old = builder.load(dptr, align=1)
+        builder.store(builder.select(take, new, old), dptr, align=1)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def nonzero_mask8(typingctx, src, off, n):  # type: ignore[no-untyped-def]
+    """Bit k set where k < min(n, 8) and ``src[off + k] != 0``: one vector compare
+    instead of a loop with a branch per lane (as :func:`copy8`: no bounds handling)."""
+    if not (isinstance(src, types.Array) and src.ndim == 1 and src.layout == "C"
+            and isinstance(src.dtype, types.Float) and isinstance(n, types.Integer)):
+        return None
+    sig = types.int64(src, types.intp, types.intp)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        sptr, vty = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
+        i64 = ir.IntType(64)
+        lanes = ir.Constant(ir.VectorType(i64, 8), [ir.Constant(i64, k) for k in range(8)])
+        splat = ir.Constant(ir.VectorType(i64, 8), ir.Undefined)
+        for k in range(8):
+            splat = builder.insert_element(splat, args[2], ir.Constant(ir.IntType(32), k))
+        within = builder.icmp_signed("<", lanes, splat)
+        nonzero = builder.fcmp_unordered("!=", builder.load(sptr, align=1), ir.Constant(vty, None))
+        return builder.zext(builder.bitcast(builder.and_(within, nonzero), ir.IntType(8)), i64)
+
+    return sig, codegen
+
+
+#: first and last set bit of each 8-bit mask (32 and -1 for none)
+FIRST_BIT = np.array([next((k for k in range(8) if m >> k & 1), 32) for m in range(256)], np.int64)
+LAST_BIT = np.array([max((k for k in range(8) if m >> k & 1), default=-1) for m in range(256)], np.int64)
+
+
+@intrinsic
+def sum8(typingctx, src, off):  # type: ignore[no-untyped-def]
+    """``src[off:off + 8].sum()`` as a fixed tree of vector adds, ((0+4) + (2+6)) + ((1+5)
+    + (3+7)): one load and three adds, the same order every call (as :func:`copy8`: no
+    bounds handling)."""
+    if not (isinstance(src, types.Array) and src.ndim == 1 and src.layout == "C"
+            and isinstance(src.dtype, types.Float)):
+        return None
+    sig = src.dtype(src, types.intp)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        sptr, vty = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
+        v = builder.load(sptr, align=1)
+        i32 = ir.IntType(32)
+        for width in (4, 2, 1):
+            lo = builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(i32, width), list(range(width))))
+            hi = builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(i32, width), list(range(width, 2 * width))))
+            v = builder.fadd(lo, hi)
+        return builder.extract_element(v, ir.Constant(i32, 0))
+
+    return sig, codegen

@@ -22,12 +22,31 @@ images here need no flip to match what a viewer sees.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 WORLD_UP = (0.0, 0.0, 1.0)
+
+
+@functools.lru_cache(maxsize=64)
+def _look_at_axes(eye: tuple[float, ...], target: tuple[float, ...]) -> np.ndarray:
+    """:meth:`Camera.axes` of a view, computed once per view: the renderers ask for it
+    on every call, and numpy's cross products of 3-vectors cost ~0.1 ms each time."""
+    e = np.asarray(eye, np.float64)
+    fwd = np.asarray(target, np.float64) - e
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, WORLD_UP)
+    n = np.linalg.norm(right)
+    if n < 1e-12:
+        raise ValueError("the view axis is vertical; the world up vector is undefined for it")
+    right /= n
+    up = np.cross(right, fwd)
+    out = np.stack([right, up, fwd])
+    out.flags.writeable = False
+    return out
 
 
 @dataclass(frozen=True)
@@ -61,17 +80,8 @@ class Camera:
         return math.tan(math.radians(self.viewing_angle_deg))
 
     def axes(self) -> np.ndarray:
-        """(3, 3) float64 rotation, rows ``right, cam_up, forward``."""
-        eye = np.asarray(self.eye, np.float64)
-        fwd = np.asarray(self.target, np.float64) - eye
-        fwd /= np.linalg.norm(fwd)
-        right = np.cross(fwd, WORLD_UP)
-        n = np.linalg.norm(right)
-        if n < 1e-12:
-            raise ValueError("the view axis is vertical; the world up vector is undefined for it")
-        right /= n
-        up = np.cross(right, fwd)
-        return np.stack([right, up, fwd])
+        """(3, 3) float64 rotation, rows ``right, cam_up, forward`` (a fresh copy)."""
+        return _look_at_axes(tuple(self.eye), tuple(self.target)).copy()
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Project (..., 3) world points to (..., 3) ``[x_ndc, y_ndc, depth]`` (numpy, float64)."""

@@ -124,7 +124,9 @@ def _check_tensors(vertices: "torch.Tensor", faces: "torch.Tensor", face_colors:
             f"({face_colors.device}) must be on the same device"
         )
     if faces.numel():
-        lo, hi = int(faces.min()), int(faces.max())
+        # numpy on the CPU: torch's integer min and max each wake its thread pool
+        idx = faces.detach().numpy() if faces.device.type == "cpu" else faces
+        lo, hi = int(idx.min()), int(idx.max())
         if lo < 0 or hi >= vertices.shape[0]:
             raise ConfigError(
                 f"faces index vertices {lo}..{hi}, but there are {vertices.shape[0]} vertices"

@@ -1,10 +1,12 @@
 """The compiled CPU backend of the soft rasterizer: per-face setup, chain rule, autograd glue.
 
 The formulas are :mod:`saucerfab.render.soft`'s; this backend only organises
-the work. torch projects the vertices (``Camera.project_torch``, autograd);
-the Function takes the projected vertices (V, 3) and the face colours and
-returns the image and alpha; its backward returns dL/d(projected vertices)
-and dL/dcolours, and autograd carries the former through the projection.
+the work. The Function takes the world vertices (V, 3), the face colours and
+the camera, projects the vertices with ``Camera.project_torch`` outside
+autograd and returns the image and alpha; its backward returns dL/d(world
+vertices) (the projection's chain rule in numba, :func:`_project_grad`: a
+dozen small autograd ops per call cost more) and dL/dcolours. Handed ``camera=None`` it takes
+vertices projected already (x_ndc, y_ndc, depth).
 
 * Per-face setup (:func:`_face_setup`): corners, SoftRas's barycentric matrix
   (adjugate / clamped determinant) and inverse corner depths. Its chain rule
@@ -18,6 +20,7 @@ and dL/dcolours, and autograd carries the former through the projection.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -116,15 +119,59 @@ def _scatter_vertices(g_corner, faces, n_vertices):  # type: ignore[no-untyped-d
     return out
 
 
+@njit(parallel=True, **JIT_OPTS)
+def _project_grad(proj, g_proj, axes, w):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """dL/d(world points) (V, 3) from dL/d(projected points) (V, 3) through
+    ``Camera.project_torch`` (``proj``: its output; ``axes`` (3, 3) and ``w``, the
+    tangent of the half viewing angle, in their dtype): with ``t = depth w``, ``x = cam_0 / t``, ``y = cam_1 / t``, ``depth = cam_2``,
+    dL/dcam = (gx / t, gy / t, g_depth - (gx x + gy y) w / t), and dL/dp = axes^T dL/dcam."""
+    out = np.empty_like(g_proj)
+    for v in prange(proj.shape[0]):
+        x, y, depth = proj[v, 0], proj[v, 1], proj[v, 2]
+        gx, gy, gz = g_proj[v, 0], g_proj[v, 1], g_proj[v, 2]
+        t = depth * w
+        k0, k1 = gx / t, gy / t
+        k2 = gz - (k0 * x + k1 * y) * w
+        for j in range(3):
+            out[v, j] = axes[0, j] * k0 + axes[1, j] * k1 + axes[2, j] * k2
+    return out
+
+
 # --------------------------------------------------------------------------- torch glue
 
 
 @dataclass(frozen=True)
 class _Config:
-    """What one call renders with: the image size S (pixels) and the checked parameters."""
+    """What one call renders with: the image size S (pixels), the checked parameters
+    and, when the Function is handed world points, the camera that projects them
+    (None: the points are projected already, (x_ndc, y_ndc, depth))."""
 
     size: int
     params: SoftParams
+    camera: "Camera | None" = None
+
+
+_SCRATCH = threading.local()
+
+
+def _scratch(name: str, size: int, dtype: np.dtype) -> np.ndarray:
+    """A buffer of at least ``size`` elements of ``dtype``, this thread's own, reused
+    from call to call (grown when too small), for what one backward call uses and
+    drops: fresh multi-MiB arrays would come back from the allocator as new pages
+    every call, a page fault per 4 KiB (about 2 ms per iteration). Not zeroed."""
+    bufs = getattr(_SCRATCH, "bufs", None)
+    if bufs is None:
+        bufs = _SCRATCH.bufs = {}
+    key = (name, np.dtype(dtype).str)
+    buf = bufs.get(key)
+    if buf is None or buf.shape[0] < size:
+        buf = bufs[key] = np.empty(size, dtype)
+    return buf
+
+
+def scratch_nbytes() -> int:
+    """Bytes this thread's reused backward buffers (:func:`_scratch`) hold now."""
+    return sum(b.nbytes for b in getattr(_SCRATCH, "bufs", {}).values())
 
 
 def _numpy(t: "torch.Tensor") -> np.ndarray:
@@ -139,9 +186,17 @@ def _make_function():  # type: ignore[no-untyped-def]
         """Autograd wrapper of the kernels: (projected vertices, colours) -> (image, alpha)."""
 
         @staticmethod
-        def forward(ctx, proj, colors, faces, cfg):  # type: ignore[no-untyped-def]
-            a_proj, a_col, a_faces = _numpy(proj), _numpy(colors), _numpy(faces)
+        def forward(ctx, points, colors, faces, cfg):  # type: ignore[no-untyped-def]
+            a_proj, a_col, a_faces = _numpy(points), _numpy(colors), _numpy(faces)
             dtype = a_proj.dtype
+            ctx.view = None
+            if cfg.camera is not None:
+                # torch's projection (the same float rounding as the torch backend's,
+                # which float32 coverage near an edge amplifies), without autograd:
+                # its chain rule is one numba loop, not a dozen small autograd ops
+                cam = cfg.camera
+                a_proj = _numpy(cam.project_torch(points))
+                ctx.view = (np.ascontiguousarray(cam.axes(), dtype=dtype), dtype.type(cam.tan_angle))
             cxy, inv, iz, det = _face_setup(a_proj, a_faces, DET_EPS)
             s = cfg.size
             bins = make_bins(cxy, s, math.sqrt(cfg.params.threshold))
@@ -161,25 +216,30 @@ def _make_function():  # type: ignore[no-untyped-def]
                     image, alpha, st_m, st_s, st_p, row_lo, row_hi,
                 )
             ctx.cfg = cfg
-            ctx.torch_dtype = proj.dtype
+            ctx.torch_dtype = points.dtype
             ctx.n_vertices = a_proj.shape[0]
-            ctx.arrays = (a_faces, cxy, inv, iz, det, a_col, K, bins, image, st_m, st_s, st_p, row_lo, row_hi)
+            ctx.arrays = (
+                a_faces, a_proj, cxy, inv, iz, det, a_col, K, bins, image, st_m, st_s, st_p, row_lo, row_hi
+            )
             return torch.from_numpy(image), torch.from_numpy(alpha)
 
         @staticmethod
         @once_differentiable
         def backward(ctx, g_image, g_alpha):  # type: ignore[no-untyped-def]
-            a_faces, cxy, inv, iz, det, a_col, K, bins, image, st_m, st_s, st_p, row_lo, row_hi = ctx.arrays
+            a_faces, a_proj, cxy, inv, iz, det, a_col, K, bins, image, st_m, st_s, st_p, row_lo, row_hi = ctx.arrays
             cfg = ctx.cfg
             dtype = cxy.dtype
             gi = np.zeros_like(image) if g_image is None else _numpy(g_image.to(ctx.torch_dtype))
             ga = np.zeros(image.shape[:2], dtype) if g_alpha is None else _numpy(g_alpha.to(ctx.torch_dtype))
-            grad = np.empty((bins.tile_entry.shape[0], N_GRAD), dtype)
+            n_entries = bins.tile_entry.shape[0]
+            grad = _scratch("grad", n_entries * N_GRAD, dtype)[:n_entries * N_GRAD].reshape(n_entries, N_GRAD)
+            buf = _scratch("bst", soft_kernels.backward_state_size(st_m.shape[0] // bins.wp, bins.wp), dtype)
             with one_tile_chunks():
+                bst, wq = soft_kernels.backward_state(image, gi, ga, st_m, st_s, st_p, bins.wp, K, buf)
                 soft_kernels.backward(
                     bins.order, bins.n_tx, cfg.size, bins.wp, bins.tile_start, bins.tile_entry, bins.entry_face,
                     bins.row_start, bins.box, cxy, inv, iz, a_col, bins.px_tab, bins.py_tab, K,
-                    image, gi, ga, st_m, st_s, st_p, row_lo, row_hi, grad,
+                    bst, wq, row_lo, row_hi, grad,
                 )
             n_faces = cxy.shape[0]
             g_corner = np.empty((n_faces, 9), dtype)
@@ -187,7 +247,10 @@ def _make_function():  # type: ignore[no-untyped-def]
             _face_grads(grad, bins.face_start, cxy, inv, iz, det, DET_EPS, g_corner, g_col)
             g_proj = None
             if ctx.needs_input_grad[0]:
-                g_proj = torch.from_numpy(_scatter_vertices(g_corner, a_faces, ctx.n_vertices))
+                g = _scatter_vertices(g_corner, a_faces, ctx.n_vertices)
+                if ctx.view is not None:
+                    g = _project_grad(a_proj, g, *ctx.view)
+                g_proj = torch.from_numpy(g)
             g_colors = torch.from_numpy(g_col) if ctx.needs_input_grad[1] else None
             return g_proj, g_colors, None, None
 
@@ -219,5 +282,4 @@ def soft_rasterize_numba(
     Returns:
         ``(image, alpha)``: shapes [S, S, 3] and [S, S], ``vertices.dtype``.
     """
-    proj = camera.project_torch(vertices)  # autograd carries the kernels' gradient to the world
-    return _function().apply(proj, face_colors, faces, _Config(camera.image_size, params))
+    return _function().apply(vertices, face_colors, faces, _Config(camera.image_size, params, camera))
