@@ -35,6 +35,7 @@ the print adds beyond any flat picture's change of perspective.
 from __future__ import annotations
 
 from pathlib import Path
+
 import numpy as np
 
 from saucerfab.verify.printfolder import CupSpec, PrintedSurface, ViewSpec
