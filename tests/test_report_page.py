@@ -63,7 +63,7 @@ def test_export_writes_checks_verify_and_report(folders, capsys):
     html = (print_dir / "report.html").read_text(encoding="utf-8")
     _no_network(html)
     for words in ("Verified: what the print shows", "Printability (saucerfab check)", "saucer.3mf",
-                  "whole-picture shift", "where to stand"):
+                  "whole-picture shift", "flat print", "where to stand"):
         assert words in html, words
 
 
@@ -73,6 +73,7 @@ def test_export_prints_the_quick_verify_and_no_verify_skips_it(folders, tmp_path
     assert main(["export", str(design), "--formats", "obj", "--out", str(out), "-q"]) == 0
     text = capsys.readouterr().out
     assert re.search(r"direct +from the design eye +\d+\.\d dB", text), text
+    assert re.search(r"direct +from the left +eye +\d+\.\d dB.*\(against the flat print\)", text), text
     assert "stand    eye 550 mm from the cup's axis" in text
     out2 = tmp_path / "q"
     assert main(["export", str(design), "--formats", "obj", "--out", str(out2), "-q", "--no-verify"]) == 0

@@ -233,10 +233,10 @@ def run(args: argparse.Namespace) -> int:
               f"{pt['min_wall_mm']:g} mm; {rule}")
     if verified is not None:
         print(f"  verified a trial export ({req.printer}, OBJ) at {verified.res} px:")
+        from saucerfab.cli.verify import view_line
+
         for v in verified.files[0].views:
-            psnr = "  -- " if v.psnr_db != v.psnr_db else f"{v.psnr_db:4.1f}"
-            print(f"    {v.view:10s} from the {v.eye:6s} eye  {psnr} dB, {v.coverage * 100:3.0f}% of the frame"
-                  f"{'' if v.passed else '  LOW'}")
+            print(f"    {view_line(v)}")
     print(f"  previews: {out / 'previews'}; report: {out / 'report.html'}")
     return 0
 

@@ -256,11 +256,10 @@ def _run_locked(args: argparse.Namespace, given: dict[str, Any]) -> int:
         v = done.verify
         print(f"  verify   {v.files[0].path.name} ray-traced at {v.res} px ({v.seconds:.0f} s; "
               f"'saucerfab verify {result.out}' for a full one)")
+        from saucerfab.cli.verify import view_line
+
         for s in v.files[0].views:
-            psnr = "  -- " if s.psnr_db != s.psnr_db else f"{s.psnr_db:4.1f}"
-            shift = "" if s.eye == "design" else " (after the best whole-picture shift)"
-            print(f"    {s.view:10s} from the {s.eye:6s} eye  {psnr} dB, {s.coverage * 100:3.0f}% of the frame"
-                  f"{'' if s.passed else '  LOW'}{shift}")
+            print(f"    {view_line(s)}")
         print(f"  stand    {stand_sentence(v.where_to_stand)}")
     for note in done.notes:
         print(f"  note: {note}")

@@ -48,6 +48,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
 
 
+def view_line(v) -> str:  # type: ignore[no-untyped-def]
+    """One view's score for the quick verifies of ``design`` and ``export``: view, eye, dB, coverage, verdict."""
+    psnr = "  -- " if v.psnr_db != v.psnr_db else f"{v.psnr_db:4.1f}"
+    against = "" if v.reference == "picture" else " (against the flat print)"
+    return (f"{v.view:10s} from the {v.eye:6s} eye  {psnr} dB, {v.coverage * 100:3.0f}% of the frame"
+            f"{'' if v.passed else '  LOW'}{against}")
+
+
 def print_scores(result, out=None) -> None:  # type: ignore[no-untyped-def]
     """The per-view table of a :class:`~saucerfab.verify.VerifyResult` for people."""
     from saucerfab.verify import stand_sentence

@@ -12,16 +12,15 @@ on the eye, so the reflected xy of every saucer vertex is computed per eye).
 **What a moved eye should see** (its targets). A moved eye looking at the
 same frame target sees the saucer shifted in its image (the saucer lies in
 front of the direct frame's target, so it moves by parallax: about 16 px at
-256 px for 32 mm), and verify scores a moved eye after the best
-whole-picture shift. Asking a moved eye to see the picture at the same place
+256 px for 32 mm). Asking a moved eye to see the picture at the same place
 in its own frame (the design frame with the camera moved) would ask for that
 shift, which no print can give both the design eye and a moved eye. What a
 viewer sees of a good print is the picture lying flat on the saucer like a
 decal: so a moved eye's target is the picture as the design eye puts it on
-the saucer's mean plane (the decal), seen from the moved eye. That is the
-picture moved and very slightly keystoned, which verify's best shift
-matches up to the keystone, and which a print could give every eye at once
-if the saucer were flat; the relief's parallax (points at different depths
+the saucer's mean plane (the decal), seen from the moved eye: what verify
+compares a moved eye with too (its flat print, ray-traced from the files:
+``saucerfab/verify/flatprint.py``), and what a print could give every eye at
+once if the saucer were flat; the relief's parallax (points at different depths
 along a ray move apart) is what is left for the optimizer to weigh.
 
 :func:`design_frame_ndc` gives, for each vertex of an eye's view, where in the
