@@ -158,6 +158,23 @@ def _clip01(w0, w1, w2, zero, one):  # type: ignore[no-untyped-def] # pragma: no
     return min(max(w0, zero), one), min(max(w1, zero), one), min(max(w2, zero), one)
 
 
+@njit(**JIT_OPTS, **_INLINE)
+def _pack_row(scr, total, px_tab, px0, py, state, s0, stride, count):  # type: ignore[no-untyped-def] # pragma: no cover - jit
+    """Append ``count`` pairs of one pixel row to the scratch at ``total``, 8 lanes at a time.
+
+    Fields (NSCR apart): 0 the pixels' x (``px_tab[px0:]``), 1 their y
+    (``py``), 2-7 the six state fields (``state[s0 + j * stride:]``, j = 0..5).
+    Whole 8-lane vector copies: up to 7 lanes past ``count`` are written too,
+    which the caller's padding absorbs and the next row (or nothing) overwrites.
+    """
+    for g0 in range(0, count, 8):
+        d = total + g0
+        copy8(scr, d, px_tab, px0 + g0)
+        fill8(scr, NSCR + d, py)
+        for j in range(6):
+            copy8(scr, (2 + j) * NSCR + d, state, s0 + j * stride + g0)
+
+
 # --------------------------------------------------------------------------- forward
 
 
@@ -202,12 +219,7 @@ def _forward_tile(
             py = py_tab[r]
             # whole 8-lane vector copies: the lanes past the box lie in the row's
             # padding and land where the next row's copy or nothing reads them
-            for g0 in range(0, w, 8):
-                d = total + g0
-                copy8(scr, d, px_tab, ca + g0)
-                fill8(scr, NSCR + d, py)
-                for j in range(6):
-                    copy8(scr, (2 + j) * NSCR + d, st, j * NLOC + q0 + g0)
+            _pack_row(scr, total, px_tab, ca, py, st, q0, NLOC, w)
             total += w
         (ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2,
          i00, i01, i02, i10, i11, i12, i20, i21, i22, iz0, iz1, iz2, fr, fg, fb) = _face_consts(
@@ -396,13 +408,7 @@ def _backward_tile(
                 # whole groups of 8 lanes, moved as vectors (copy8); the lanes past hi
                 # (the row's next pixels, or its padding) are overwritten by the next
                 # row or lie past the entry's total
-                o = 6 * wq * r + ca + lo
-                for g0 in range(0, hi - lo + 1, 8):
-                    d = total + g0
-                    copy8(scr, d, px_tab, ca + lo + g0)
-                    fill8(scr, NSCR + d, py)
-                    for j in range(6):
-                        copy8(scr, (2 + j) * NSCR + d, bst, o + j * wq + g0)
+                _pack_row(scr, total, px_tab, ca + lo, py, bst, 6 * wq * r + ca + lo, wq, hi - lo + 1)
                 total += hi - lo + 1
         if total > 0:
             (ax0, ay0, ax1, ay1, ax2, ay2, ex0, ey0, ex1, ey1, ex2, ey2, ie0, ie1, ie2,

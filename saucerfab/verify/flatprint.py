@@ -143,12 +143,14 @@ class FlatPrints:
     def __init__(self, surface: PrintedSurface, cup: CupSpec, design_eye: tuple[float, float, float],
                  views: dict[str, ViewSpec], pictures: dict[str, np.ndarray], regions: dict[str, np.ndarray],
                  size: int, spp: int) -> None:
+        self.heights: dict[str, float] = {}
+        self._tracers: dict[str, PrintTracer] = {}
+        if not surface.top.any() or not any(r.any() for r in regions.values()):
+            return  # the design eye sees no printed top: no flat print, nothing to compare
         top_scene = position_scene(surface.vertices, surface.faces[surface.top], cup, axes=(2, 2))
         lo, hi = surface.vertices.min(axis=0), surface.vertices.max(axis=0)
         pad = float(np.max(hi - lo))  # the plane reaches well past the saucer: a moved eye's rays land anywhere
         extent = (float(lo[0] - pad), float(hi[0] + pad), float(lo[1] - pad), float(hi[1] + pad))
-        self.heights: dict[str, float] = {}
-        self._tracers: dict[str, PrintTracer] = {}
         for name, view in views.items():
             if not regions[name].any():
                 continue  # the design eye sees nothing of this view: no flat print, nothing to compare

@@ -135,6 +135,13 @@ def test_a_view_the_design_eye_does_not_see_has_no_flat_print(prints):
     flats = FlatPrints(surface, scene.cup, scene.camera, scene.views, pictures, regions, RES, 4)
     rgb, seen = flats.render("direct", scene.camera, scene.views["direct"], RES, 4)
     assert not seen.any() and rgb.shape == (RES, RES, 3)
+    # nor does a file without a printed top (every face a wall): nothing to build, no error
+    from dataclasses import replace
+
+    bare = replace(surface, top=np.zeros_like(surface.top))
+    everywhere = {v: np.ones((RES, RES), bool) for v in scene.views}
+    flats = FlatPrints(bare, scene.cup, scene.camera, scene.views, pictures, everywhere, RES, 4)
+    assert flats.heights == {} and not flats.render("reflected", scene.camera, scene.views["reflected"], RES, 4)[1].any()
 
 
 def test_a_relief_s_parallax_is_what_a_moved_eye_loses(prints, tmp_path):
