@@ -216,6 +216,21 @@ def _vec_ptr(context, builder, aryty, ary, offset):  # type: ignore[no-untyped-d
     return builder.bitcast(builder.gep(arr.data, [offset]), vty.as_pointer()), vty
 
 
+def _splat(builder, vty, value):  # type: ignore[no-untyped-def]
+    """``value`` in every lane of vector type ``vty``."""
+    vec = ir.Constant(vty, ir.Undefined)
+    for k in range(vty.count):
+        vec = builder.insert_element(vec, value, ir.Constant(ir.IntType(32), k))
+    return vec
+
+
+def _lanes_below(builder, n):  # type: ignore[no-untyped-def]
+    """An 8-lane i1 mask: lane k set where k < ``n`` (an i64)."""
+    i64 = ir.IntType(64)
+    lanes = ir.Constant(ir.VectorType(i64, 8), [ir.Constant(i64, k) for k in range(8)])
+    return builder.icmp_signed("<", lanes, _splat(builder, ir.VectorType(i64, 8), n))
+
+
 @intrinsic
 def copy8(typingctx, dst, doff, src, soff):  # type: ignore[no-untyped-def]
     """``dst[doff:doff + 8] = src[soff:soff + 8]`` as one unaligned vector load and store.
@@ -247,10 +262,7 @@ def fill8(typingctx, dst, doff, value):  # type: ignore[no-untyped-def]
 
     def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
         dptr, vty = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
-        vec = ir.Constant(vty, ir.Undefined)
-        for k in range(8):
-            vec = builder.insert_element(vec, args[2], ir.Constant(ir.IntType(32), k))
-        builder.store(vec, dptr, align=1)
+        builder.store(_splat(builder, vty, args[2]), dptr, align=1)
         return context.get_dummy_value()
 
     return sig, codegen
@@ -271,12 +283,7 @@ def blend8(typingctx, dst, doff, src, soff, n):  # type: ignore[no-untyped-def]
     def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
         sptr, vty = _vec_ptr(context, builder, sig.args[2], args[2], args[3])
         dptr, _ = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
-        i64 = ir.IntType(64)
-        lanes = ir.Constant(ir.VectorType(i64, 8), [ir.Constant(i64, k) for k in range(8)])
-        splat = ir.Constant(ir.VectorType(i64, 8), ir.Undefined)
-        for k in range(8):
-            splat = builder.insert_element(splat, args[4], ir.Constant(ir.IntType(32), k))
-        take = builder.icmp_signed("<", lanes, splat)
+        take = _lanes_below(builder, args[4])
         new = builder.load(sptr, align=1)
         old = builder.load(dptr, align=1)
         builder.store(builder.select(take, new, old), dptr, align=1)
@@ -297,11 +304,7 @@ def nonzero_mask8(typingctx, src, off, n):  # type: ignore[no-untyped-def]
     def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
         sptr, vty = _vec_ptr(context, builder, sig.args[0], args[0], args[1])
         i64 = ir.IntType(64)
-        lanes = ir.Constant(ir.VectorType(i64, 8), [ir.Constant(i64, k) for k in range(8)])
-        splat = ir.Constant(ir.VectorType(i64, 8), ir.Undefined)
-        for k in range(8):
-            splat = builder.insert_element(splat, args[2], ir.Constant(ir.IntType(32), k))
-        within = builder.icmp_signed("<", lanes, splat)
+        within = _lanes_below(builder, args[2])
         nonzero = builder.fcmp_unordered("!=", builder.load(sptr, align=1), ir.Constant(vty, None))
         return builder.zext(builder.bitcast(builder.and_(within, nonzero), ir.IntType(8)), i64)
 
