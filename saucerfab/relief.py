@@ -39,6 +39,11 @@ holds.
 
 Units: any length unit, the same for heights and spacings (the optimizer
 works in model units, the export in millimetres).
+
+Speed: the optimizer projects every trial step, so the wall rule's walks run
+in numba (:mod:`saucerfab.relief_kernels`); the numpy versions here
+(:func:`wall_widths_reference`, :func:`bisect_tops_reference`) are their
+references, equal bit for bit (tests/test_relief.py).
 """
 
 from __future__ import annotations
@@ -170,6 +175,12 @@ def _walk_width(neighbour: Callable[[int, int], np.ndarray], top: np.ndarray, le
     return width
 
 
+def _line_tables(dx: float, dy: float) -> tuple[np.ndarray, np.ndarray]:
+    """The kernels' view of :data:`_WALL_LINES`: each line's length and what lies beyond the border."""
+    return (np.array([_length(which, dx, dy) for _, _, which, _ in _WALL_LINES]),
+            np.array([beyond for _, _, _, beyond in _WALL_LINES]))
+
+
 def wall_widths(heights: np.ndarray, dx: float, dy: float, depth: float, rise_tol: float = 0.0) -> np.ndarray:
     """Width of each crest at ``depth`` below its top (the wall rule); ``inf`` where it is no crest.
 
@@ -182,7 +193,19 @@ def wall_widths(heights: np.ndarray, dx: float, dy: float, depth: float, rise_to
     Returns:
         (N, M) float64 widths, the smallest over the three mesh lines, border
         vertices included (beyond the border the side wall drops straight down).
+        The numba kernel :func:`saucerfab.relief_kernels.wall_widths_grid`;
+        :func:`wall_widths_reference` is the same in numpy, bit for bit.
     """
+    from saucerfab.relief_kernels import wall_widths_grid
+
+    lengths, beyond = _line_tables(dx, dy)
+    return wall_widths_grid(np.ascontiguousarray(heights, np.float64), float(depth), lengths, beyond,
+                            _wall_steps(depth * WALL_MARGIN, dx, dy), float(rise_tol))
+
+
+def wall_widths_reference(heights: np.ndarray, dx: float, dy: float, depth: float,
+                          rise_tol: float = 0.0) -> np.ndarray:
+    """:func:`wall_widths` in whole-grid numpy passes (the kernel's reference)."""
     h = np.asarray(heights, np.float64)
     rows, cols = h.shape
     k_max = _wall_steps(depth * WALL_MARGIN, dx, dy)
@@ -196,6 +219,53 @@ def wall_widths(heights: np.ndarray, dx: float, dy: float, depth: float, rise_to
 
         out = np.minimum(out, _walk_width(shifted, h, h - depth, _length(which, dx, dy), k_max, rise_tol=rise_tol))
     return out
+
+
+#: bisection rounds of the wall rule's lowering (2**-30 of the search interval)
+BISECT_ROUNDS = 30
+
+
+def bisect_tops_reference(h: np.ndarray, ii: np.ndarray, jj: np.ndarray, lo_vals: np.ndarray, depth: float,
+                          want: float, k: int, dx: float, dy: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per thin crest (ii, jj) the highest top at which it is ``want`` wide ``depth`` below, in numpy.
+
+    The reference of :func:`saucerfab.relief_kernels.bisect_tops`: the
+    neighbours stay at ``h``, a neighbour above the trial top counts as at it.
+    Returns (lo_top (K,), ok_low (K,): wide enough at its lowest allowed top).
+    """
+    padded = [(np.pad(h, k, constant_values=beyond), di, dj, _length(which, dx, dy))
+              for di, dj, which, beyond in _WALL_LINES]
+    pi, pj = ii + k, jj + k
+
+    def wide(top: np.ndarray) -> np.ndarray:
+        w = np.full(top.shape, np.inf)
+        for hp, di, dj, length in padded:
+            def gather(side: int, step: int, _hp: np.ndarray = hp, _di: int = di, _dj: int = dj) -> np.ndarray:
+                return _hp[pi + side * step * _di, pj + side * step * _dj]
+
+            w = np.minimum(w, _walk_width(gather, top, top - depth, length, k, plateau=True))
+        return w >= want
+
+    hi_top = h[ii, jj].copy()  # too high (thin)
+    # a crest never needs to come down further than a few walls (and lo may be -inf)
+    lo_top = np.maximum(lo_vals, hi_top - 16.0 * depth)
+    ok_low = wide(lo_top)
+    for _ in range(BISECT_ROUNDS):
+        mid = 0.5 * (hi_top + lo_top)
+        w = wide(mid)
+        lo_top = np.where(w, mid, lo_top)
+        hi_top = np.where(w, hi_top, mid)
+    return lo_top, ok_low
+
+
+def _bisect_tops(h: np.ndarray, ii: np.ndarray, jj: np.ndarray, lo_vals: np.ndarray, depth: float,
+                 want: float, k: int, dx: float, dy: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`bisect_tops_reference` by the numba kernel (the same float operations)."""
+    from saucerfab.relief_kernels import bisect_tops
+
+    lengths, beyond = _line_tables(dx, dy)
+    return bisect_tops(np.ascontiguousarray(h, np.float64), ii, jj, np.ascontiguousarray(lo_vals, np.float64),
+                       float(depth), float(want), k, lengths, beyond, BISECT_ROUNDS)
 
 
 def _lower_until_wide(h: np.ndarray, lo: np.ndarray, dx: float, dy: float, depth: float,
@@ -214,28 +284,7 @@ def _lower_until_wide(h: np.ndarray, lo: np.ndarray, dx: float, dy: float, depth
     if not thin.any():
         return h, np.zeros(h.shape, bool)
     ii, jj = np.nonzero(thin)
-    padded = [(np.pad(h, k, constant_values=beyond), di, dj, _length(which, dx, dy))
-              for di, dj, which, beyond in _WALL_LINES]
-    pi, pj = ii + k, jj + k
-
-    def wide(top: np.ndarray) -> np.ndarray:
-        w = np.full(top.shape, np.inf)
-        for hp, di, dj, length in padded:
-            def gather(side: int, step: int, _hp: np.ndarray = hp, _di: int = di, _dj: int = dj) -> np.ndarray:
-                return _hp[pi + side * step * _di, pj + side * step * _dj]
-
-            w = np.minimum(w, _walk_width(gather, top, top - depth, length, k, plateau=True))
-        return w >= want
-
-    hi_top = h[ii, jj].copy()  # too high (thin)
-    # a crest never needs to come down further than a few walls (and lo may be -inf)
-    lo_top = np.maximum(lo[ii, jj], hi_top - 16.0 * depth)
-    ok_low = wide(lo_top)
-    for _ in range(30):
-        mid = 0.5 * (hi_top + lo_top)
-        w = wide(mid)
-        lo_top = np.where(w, mid, lo_top)
-        hi_top = np.where(w, hi_top, mid)
+    lo_top, ok_low = _bisect_tops(h, ii, jj, lo[ii, jj], depth, want, k, dx, dy)
     out = h.copy()
     # a hair lower than the bisection's answer: the rule can jump there (a dip of exactly ``depth``
     # before a rise ends the crest), and the optimizer's float32 must not round back across it

@@ -30,6 +30,12 @@ def warm_up(*, check: bool = True) -> list[str]:
     from saucerfab.fabricate.kernels import warm_up as fab_warm_up
 
     done += [f"fabricate.{k}" for k in fab_warm_up()]
+    from saucerfab.relief import blunt_thin_crests
+
+    spike = np.zeros((5, 5))
+    spike[2, 2] = 3.0
+    blunt_thin_crests(spike, 0.5, 0.5, 0.3, min_wall=1.0)  # both wall kernels (relief_kernels.py)
+    done.append("relief.wall_kernels")
     if check:
         done += warm_up_check()
 

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+from saucerfab import relief
 from saucerfab.errors import ConfigError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.optimize.printable import CrestProjection, preflight, print_target, worst_case_bbox_mm
@@ -170,6 +171,46 @@ def test_wall_widths_match_the_reference_walk() -> None:
     for depth in (0.5, 1.0, 2.0):
         np.testing.assert_allclose(wall_widths(h, 0.67, 0.5, depth), reference_wall_widths(h, 0.67, 0.5, depth),
                                    rtol=1e-12)
+
+
+def _rough(seed: int, n: int = 23, m: int = 29) -> np.ndarray:
+    """A rough field with needles: many thin crests and walls for both rules."""
+    rng = np.random.default_rng(seed)
+    h = np.cumsum(rng.normal(0, 0.6, size=(n, m)), axis=0) + rng.gamma(0.4, 2.0, size=(n, m))
+    h[rng.random(h.shape) < 0.05] += 4.0
+    return h
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_wall_kernels_equal_their_numpy_reference_bit_for_bit(seed: int) -> None:
+    # the optimizer projects every trial step: a last-bit difference would send it down another path
+    h = _rough(seed)
+    for depth in (0.5, 1.0, 2.0):
+        for rise in (0.0, 1e-3):
+            assert np.array_equal(wall_widths(h, 0.67, 0.5, depth, rise),
+                                  relief.wall_widths_reference(h, 0.67, 0.5, depth, rise))
+    lo = h - np.random.default_rng(seed).uniform(0.0, 3.0, size=h.shape)
+    lo[0, :] = -np.inf  # unbounded vertices too
+    ii, jj = np.nonzero(wall_widths(h, 0.67, 0.5, 1.0) < 1.25)
+    assert len(ii) > 5
+    k = relief._wall_steps(1.275, 0.67, 0.5)
+    fast = relief._bisect_tops(h, ii, jj, lo[ii, jj], 1.0, 1.275, k, 0.67, 0.5)
+    ref = relief.bisect_tops_reference(h, ii, jj, lo[ii, jj], 1.0, 1.275, k, 0.67, 0.5)
+    assert np.array_equal(fast[0], ref[0]) and np.array_equal(fast[1], ref[1])
+    assert fast[1].any() and not fast[1].all()  # both outcomes exercised
+
+
+def test_blunting_by_the_kernels_equals_blunting_by_the_reference(monkeypatch: pytest.MonkeyPatch) -> None:
+    h = _rough(7, 40, 40)
+    lo, hi = h - 1.5, h + 1.5
+    fast = blunt_thin_crests(h, 0.67, 0.67, 0.3, lo, hi, min_wall=1.0, tighten=1e-3)
+    monkeypatch.setattr(relief, "wall_widths", relief.wall_widths_reference)
+    monkeypatch.setattr(relief, "_bisect_tops", relief.bisect_tops_reference)
+    ref = blunt_thin_crests(h, 0.67, 0.67, 0.3, lo, hi, min_wall=1.0, tighten=1e-3)
+    assert fast.sweeps > 1 and fast.lowered > 10
+    assert np.array_equal(fast.heights, ref.heights)
+    assert (fast.lowered, fast.raised, fast.sweeps, fast.remaining) == (ref.lowered, ref.raised, ref.sweeps,
+                                                                         ref.remaining)
 
 
 def test_a_tall_needle_is_a_wall_a_short_one_is_not() -> None:

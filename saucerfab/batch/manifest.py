@@ -414,7 +414,7 @@ def _check_design_options(
             raise ConfigError(f"{where} design_options: {name} must be {want}, got {value!r}")
     try:
         request = DesignRequest(direct=files["direct"], reflected=files["reflected"], **options)
-        check_weights(request.ablation, {w.key: getattr(request, w.key) for w in WEIGHTS})
+        check_weights(request.ablation, {w.key: getattr(request, w.key) for w in WEIGHTS}, request.method)
         check_height_scale(request.height_scale)
     except SaucerfabError as exc:
         raise ConfigError(f"{where} design_options: {exc}") from None

@@ -43,10 +43,10 @@ from saucerfab.optimize.prepare import Prepared, prepare
 from saucerfab.optimize.printable import PrintTarget
 from saucerfab.optimize.request import DesignRequest
 from saucerfab.optimize.stages import (
-    ABLATION_STAGES,
     SIGMA_LARGE,
     WEIGHT_FACTORS,
     StageSpec,
+    stages_for,
     term_weight,
     without_enhancement,
 )
@@ -192,7 +192,7 @@ def run_design(
     t_start = time.perf_counter()
     check_output_folder(out)
     prep = prepare(request)
-    stages = ABLATION_STAGES[request.ablation]
+    stages = stages_for(request.ablation, request.method)
     if prep.enhancement and prep.enhancement["strategy"] == "none":
         stages = without_enhancement(stages)
     ckpt = _Checkpoint(out, request_hash(request, prep))

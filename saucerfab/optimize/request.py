@@ -18,7 +18,7 @@ from saucerfab.eyes import DEFAULT_IPD_MM, DESIGN_EYES_USAGE, EyeSpec, parse_eye
 from saucerfab.heightfield import HEIGHT_SCALE
 from saucerfab.images import FITS
 from saucerfab.optimize.energies import WEIGHTS
-from saucerfab.optimize.stages import ABLATION_STAGES, MAX_ITERS
+from saucerfab.optimize.stages import ABLATION_STAGES, MAX_ITERS, METHODS, check_weights, stages_for
 from saucerfab.profiles import DEFAULT_PRINTER
 from saucerfab.scene import VIEW_NAMES
 
@@ -83,6 +83,12 @@ class DesignRequest(_Weights):
         max_iters: iteration cap per stage.
         ablation: "full" (the paper's method) or one of Figure 11's ablations
             (:data:`ABLATIONS`, the keys of :data:`saucerfab.optimize.stages.ABLATION_STAGES`).
+        method: how the full method runs (:data:`METHODS`): "paper" (the
+            default) runs Algorithm 1's three stages; "fast" skips the
+            small-sigma Laplacian stage, a draft mode (0.5-0.8x the time,
+            verified pictures -1.6 to +3.5 dB: benchmarks/RESULTS.md). The
+            ablations always run as the paper wrote them ("fast" with one is
+            refused). :func:`saucerfab.optimize.stages.stages_for`.
         frames: "inscribed" (the default) re-aims the scene's view frames at
             the largest square wholly on the saucer and wholly on its
             reflection, so each whole picture is seen; "contain" at the
@@ -151,6 +157,7 @@ class DesignRequest(_Weights):
     height_scale: float = HEIGHT_SCALE
     max_iters: int = MAX_ITERS
     ablation: str = "full"
+    method: str = METHODS[0]
     frames: str = FRAMES[0]
     enhancement: str = ENHANCEMENTS[0]
     fit: str = FITS[0]
@@ -198,6 +205,7 @@ class DesignRequest(_Weights):
                 object.__setattr__(self, name, Path(os.fspath(v)))
         if self.ablation not in ABLATIONS:
             raise ConfigError(f"unknown ablation {self.ablation!r}; use one of {ABLATIONS}")
+        stages_for(self.ablation, self.method)  # refuses an unknown method, and fast with an ablation
         self.fit_by_view()  # refuses a bad --fit now, before any work
         if self.background is not None:
             from saucerfab.images import parse_colour
@@ -242,6 +250,8 @@ class DesignRequest(_Weights):
                 raise ConfigError(f"{w.key} must be positive, got {v!r}")
             if not w.positive and v is not None and not (v >= 0):
                 raise ConfigError(f"{w.key} must be a non-negative number, got {v!r}")
+        # a weight no stage of this run uses would be ignored
+        check_weights(self.ablation, {w.key: getattr(self, w.key) for w in WEIGHTS}, self.method)
 
     @classmethod
     def default(cls, name: str) -> object:

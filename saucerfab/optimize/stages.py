@@ -13,20 +13,13 @@ The paper's method ("full", Figure 11 f)::
 
 then texturing (always).
 
-One deliberate change from the paper: the sparse stage renders with the
-large sigma (:data:`SIGMA_SPARSE`), not the small one. At sigma 1e-7 a face
-influences pixels only within about 0.1 px of its edges (512 x 512), so once
-the Laplacian term is dropped the visual term gives no usable descent: on
-the bundled samples the line searches failed within 10-16 iterations and the
-moves made raised the final E_visual (7461 -> 7485-7528 over the lambdas,
-prox steps and line-search lengths tried). At sigma 1e-5 the same stage (the
-paper's lambda and alpha) moves 8 % of the vertices and lowers the final
-E_visual by 3.7 % (``benchmarks/bench_sparse_stage.py``; benchmarks/RESULTS.md).
-
-The energies a stage can use are declared in :mod:`saucerfab.optimize.energies`
-(:data:`~saucerfab.optimize.energies.TERMS`); a stage names its regulariser
-and the weight that scales it, and :func:`term_weight` gives every term's
-weight in a stage.
+How the full method runs (:data:`METHODS`, ``--method``): ``"paper"``, the
+default, runs all three stages; ``"fast"`` runs the first and the last and
+skips the small-sigma Laplacian stage, a draft mode for trying pictures: on
+the bundled pairs it took 0.5-0.8x the time and its verified pictures moved
+by -1.6 to +3.5 dB from the design eye (mean about 0; the photographs lost
+up to 1.6 dB), so it is not the default (benchmarks/RESULTS.md, "Design
+speed"). The ablations (Figure 11) always run as the paper wrote them.
 """
 
 from __future__ import annotations
@@ -94,6 +87,32 @@ ABLATION_STAGES: dict[str, list[StageSpec]] = {
     "full": _lap("bw", "enhanced") + [StageSpec("sparse", "enhanced", SIGMA_SPARSE, "sparse", "lam")],
 }
 
+#: how the full method runs (``DesignRequest.method``; the first is the default)
+METHODS = ("paper", "fast")
+
+
+def stages_for(ablation: str, method: str = METHODS[0]) -> list[StageSpec]:
+    """The stages of ``ablation`` as ``method`` runs them (module docstring).
+
+    Args:
+        ablation: a key of :data:`ABLATION_STAGES` ("full" is the paper's method).
+        method: one of :data:`METHODS`.
+    Raises:
+        ConfigError: an unknown method, or "fast" with an ablation other than "full" (they run as written).
+    """
+    if method not in METHODS:
+        raise ConfigError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if method == "fast" and ablation != "full":
+        raise ConfigError(
+            f"--method fast shortens the full method, but --ablation {ablation} is one of the paper's Figure 11 "
+            "settings, which run as written; drop --method fast, or --ablation"
+        )
+    stages = ABLATION_STAGES[ablation]
+    if method == "fast":
+        stages = [st for st in stages if not (st.regulariser == "deform" and st.sigma == SIGMA_SMALL)]
+    return stages
+
+
 def without_enhancement(stages: list[StageSpec]) -> list[StageSpec]:
     """The same stages against the original images (for pictures with no clear subject).
 
@@ -124,9 +143,9 @@ def _check_table() -> None:
 _check_table()
 
 
-def weights_used(ablation: str) -> set[str]:
-    """The weight options (``w_large``, ``w_small``, ``lam``) that the stages of ``ablation`` use."""
-    return {spec.weight for spec in ABLATION_STAGES[ablation] if spec.weight}
+def weights_used(ablation: str, method: str = METHODS[0]) -> set[str]:
+    """The weight options (``w_large``, ``w_small``, ``lam``) that the stages of ``ablation`` use (:func:`stages_for`)."""
+    return {spec.weight for spec in stages_for(ablation, method) if spec.weight}
 
 
 def term_weight(spec: StageSpec, term: Term, values: Mapping[str, float]) -> float:
@@ -145,21 +164,31 @@ def term_weight(spec: StageSpec, term: Term, values: Mapping[str, float]) -> flo
     return values[fixed[0].key] if fixed else 0.0
 
 
-def check_weights(ablation: str, given: Mapping[str, float | None]) -> None:
-    """Refuse a per-stage weight that no stage of ``ablation`` uses (it would be ignored).
+def _every_weight(ablation: str) -> set[str]:
+    """The weight options of every stage of ``ablation`` as the paper wrote it."""
+    return {spec.weight for spec in ABLATION_STAGES[ablation] if spec.weight}
+
+
+def check_weights(ablation: str, given: Mapping[str, float | None], method: str = METHODS[0]) -> None:
+    """Refuse a per-stage weight that no stage of ``ablation`` run by ``method`` uses (it would be ignored).
 
     Args:
         given: weight key -> the value given, None where not given.
     Raises:
-        ConfigError: naming the option, the ablation's weight options and the ablations that use it.
+        ConfigError: naming the option, the stages' weight options and what uses it.
     """
-    used = weights_used(ablation)
+    used = weights_used(ablation, method)
     per_stage = [w for w in WEIGHTS if w.per_stage]
     for w in per_stage:
         if given.get(w.key) is None or w.key in used:
             continue
-        takers = ", ".join(a for a in ABLATION_STAGES if w.key in weights_used(a))
         uses = ", ".join(v.option for v in per_stage if v.key in used) or "no weight option"
+        if ablation == "full" and w.key in _every_weight(ablation):
+            raise ConfigError(
+                f"{w.option} weighs a stage that --method {method} skips (its stages use {uses}); "
+                f"drop {w.option}, or --method {method} (--method paper runs every stage)"
+            )
+        takers = ", ".join(a for a in ABLATION_STAGES if w.key in _every_weight(a))
         raise ConfigError(
             f"{w.option} is not used by --ablation {ablation} (its stages use {uses}); "
             f"drop {w.option}, or choose an --ablation that uses it ({takers})"

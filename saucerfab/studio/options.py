@@ -170,7 +170,7 @@ def design_request(ws: Workspace, options: dict[str, Any]) -> Any:
         raise ConfigError(f"unknown printer {given['printer']!r}; the printers are {sorted(list_profiles())}")
     ablation = given.get("ablation", DesignRequest.default("ablation"))
     if isinstance(ablation, str):
-        check_weights(ablation, given)
+        check_weights(ablation, given, given.get("method", DesignRequest.default("method")))
     try:
         return DesignRequest(**given)
     except (TypeError, ValueError) as exc:  # a value the dataclass could not even compare

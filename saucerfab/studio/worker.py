@@ -146,9 +146,9 @@ def _end(ws: Workspace, run_id: str, status: str, error: str | None = None, note
 
 def _stages(request: Any) -> list[str]:
     """The stage names of the request's method, both with and without the black-white enhancement."""
-    from saucerfab.optimize.stages import ABLATION_STAGES, without_enhancement
+    from saucerfab.optimize.stages import stages_for, without_enhancement
 
-    specs = ABLATION_STAGES[request.ablation]
+    specs = stages_for(request.ablation, request.method)
     return [s.name for s in specs] + [s.name for s in without_enhancement(specs)]
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from saucerfab.cli import main
 from saucerfab.design import FaceView, load_design
-from saucerfab.errors import ImageError, ShapeError
+from saucerfab.errors import ConfigError, ImageError, ShapeError
 from saucerfab.optimize.pipeline import run_design
 from saucerfab.optimize.request import DesignRequest
 
@@ -34,6 +34,7 @@ def test_design_folder_is_complete_and_bounded(small_design) -> None:  # noqa: A
     delta = d.scene.saucer.delta
     assert np.abs(d.heights - d.base_heights).max() < delta
     assert [s["name"] for s in meta["metrics"]["stages"]] == ["bw_sigma_large", "bw_sigma_small", "sparse"]
+    assert meta["parameters"]["method"] == "paper"
     for st in meta["metrics"]["stages"]:
         for key in ("E_visual", "E_deform", "conflict_fraction", "max_abs_height_change", "iterations", "seconds"):
             assert key in st
@@ -114,7 +115,6 @@ def test_without_times_the_design_folder_is_byte_identical(tmp_path) -> None:  #
 
 
 def test_an_unrelated_output_folder_or_file_is_never_replaced(tmp_path) -> None:  # noqa: ANN001
-    from saucerfab.errors import ConfigError
 
     req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png",
                         resolution=8, image_size=16, max_iters=2)
@@ -192,6 +192,34 @@ def test_cli_design_refuses_a_weight_the_ablation_does_not_use(tmp_path, capsys)
     assert weights_used("sparse_only") == {"lam"}
     assert weights_used("laplacian") == {"w_large", "w_small"}
     assert weights_used("full") == {"w_large", "w_small", "lam"}
+    assert weights_used("full", "fast") == {"w_large", "lam"}  # fast skips the small-sigma stage
+
+
+def test_method_fast_skips_the_small_sigma_stage(tmp_path, capsys) -> None:
+    from saucerfab.optimize.stages import ABLATION_STAGES, stages_for
+
+    assert stages_for("full") == ABLATION_STAGES["full"]  # the default: the paper's three stages
+    assert stages_for("full", "fast") == [ABLATION_STAGES["full"][0], ABLATION_STAGES["full"][2]]
+    assert stages_for("laplacian") == ABLATION_STAGES["laplacian"]
+    req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", method="fast", **TINY_REQ)
+    out = run_design(req, tmp_path / "d", progress=lambda *a: None)
+    meta = json.loads((out / "design.json").read_text())
+    assert meta["parameters"]["method"] == "fast"
+    assert [s["name"] for s in meta["parameters"]["stages"]] == ["bw_sigma_large", "sparse"]
+    assert [s["name"] for s in meta["metrics"]["stages"]] == ["bw_sigma_large", "sparse"]
+    # contradictions are refused, naming the fix: an ablation runs as written; w_small weighs a skipped stage
+    d = tmp_path / "e"
+    assert main(_design_argv(d, "--ablation", "laplacian", "--method", "fast")) == 2
+    err = capsys.readouterr().err
+    assert "--method fast" in err and "--ablation laplacian" in err and "Traceback" not in err
+    assert main(_design_argv(d, "--method", "fast", "--w-small", "5")) == 2
+    err = capsys.readouterr().err
+    assert "--w-small" in err and "--method fast skips" in err
+    with pytest.raises(ConfigError, match="--method fast"):
+        DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", method="fast", w_small=5.0)
+    with pytest.raises(ConfigError, match="method must be one of paper, fast"):
+        DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", method="quick")
+    assert not d.exists()
 
 
 def test_interrupt_in_the_first_stage_says_nothing_finished(tmp_path) -> None:

@@ -1,0 +1,156 @@
+"""Issue 18 in one run: old and new default design times with verified quality, the first look, the rasterizer.
+
+    .venv/bin/python benchmarks/bench_speed.py --old cdd73fc --arm fast='--method fast'   # every bundled pair
+    .venv/bin/python benchmarks/bench_speed.py --old cdd73fc --pairs heart-star --no-render --no-first-look
+
+For each pair, ``saucerfab design`` exactly as a user types it (defaults,
+its quick verify included) by the old code (``--old``: a git revision,
+copied with ``git archive`` and its numba kernels compiled before the clock
+starts) and by this checkout, in alternating order (old first on the 1st,
+3rd, ... pair, new first on the others, so that a drifting machine load
+favours neither). Each design is exported for the J55 (OBJ, 80 mm cup) and
+verified by *this* checkout's ``saucerfab verify`` at 256 px, 16 spp from
+the design eye and a viewer's two eyes (the same instrument for both), and
+each row gives design seconds, the stages' iterations and the PSNR per view
+and eye. Then, in the same run, ``bench_first_look.py --repeat 3`` and
+``bench_render.py --repeat 15 --torch-repeat 2`` (their own tables).
+
+Times are wall-clock on a shared machine: the ratio within a pair is the
+figure; the load average is printed at each step.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_design import machine  # noqa: E402
+
+from saucerfab.samples import PAIRS, SAMPLES  # noqa: E402
+from saucerfab.verify import EyeSpec, verify_print  # noqa: E402
+
+EYES = ("design", "left", "right")
+
+
+def old_copy(rev: str, dest: Path) -> Path:
+    """``rev`` of this repository as files in ``dest`` (``git archive``), its numba kernels compiled."""
+    dest.mkdir(parents=True)
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev], check=True, capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
+    subprocess.run([sys.executable, "-m", "saucerfab.warmup"], cwd=dest, env=_env(dest), check=True,
+                   capture_output=True)
+    return dest
+
+
+def _env(code: Path) -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": str(code)}
+
+
+def design(code: Path, pair: str, out: Path, extra: list[str]) -> dict:
+    """``saucerfab design`` of ``pair`` by the code in ``code`` (as typed, plus ``extra``); seconds and stages."""
+    direct, reflected = PAIRS[pair]
+    cmd = [sys.executable, "-m", "saucerfab", "design", "--direct", str(SAMPLES / direct), "--reflected",
+           str(SAMPLES / reflected), "--out", str(out), "--quiet", *extra]
+    t0 = time.perf_counter()
+    subprocess.run(cmd, cwd=code, env=_env(code), check=True, capture_output=True)
+    seconds = time.perf_counter() - t0
+    meta = json.loads((out / "design.json").read_text())
+    stages = [(s["name"], s["iterations"], s.get("seconds", float("nan"))) for s in meta["metrics"]["stages"]]
+    return {"seconds": seconds, "stages": stages, "total_s": meta["metrics"].get("total_s")}
+
+
+def verified(design_dir: Path, print_dir: Path) -> dict[str, float]:
+    """Export for the J55 (OBJ) and verify at 256 px, 16 spp from three eyes: "view/eye" -> PSNR dB."""
+    subprocess.run([sys.executable, "-m", "saucerfab", "export", str(design_dir), "--printer", "j55",
+                    "--cup-diameter-mm", "80", "--formats", "obj", "--out", str(print_dir), "--quiet",
+                    "--no-verify", "--no-check"], cwd=ROOT, env=_env(ROOT), check=True, capture_output=True)
+    res = verify_print(print_dir, eyes=EyeSpec("both"), res=256, spp=16, all_formats=False)
+    return {f"{v.view}/{v.eye}": v.psnr_db for v in res.files[0].views}
+
+
+def _load() -> str:
+    return f"{os.getloadavg()[0]:.1f}"
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--old", required=True, help="git revision of the old default (e.g. the commit before the change)")
+    p.add_argument("--pairs", default="all", help=f"comma-separated or all: {', '.join(PAIRS)}")
+    p.add_argument("--no-first-look", action="store_true")
+    p.add_argument("--no-render", action="store_true")
+    p.add_argument("--json", help="also write the rows as JSON here")
+    p.add_argument("--arm", action="append", default=[], metavar="LABEL=OPTIONS",
+                   help="one more configuration of this checkout, e.g. fast='--method fast' (repeatable)")
+    args = p.parse_args()
+    pairs = list(PAIRS) if args.pairs == "all" else args.pairs.split(",")
+    extra_arms = [(a.split("=", 1)[0], ROOT, shlex.split(a.split("=", 1)[1])) for a in args.arm]
+    print(f"machine: {machine()}; old = {args.old}, new = this checkout; start load {_load()}", flush=True)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp_s:
+        tmp = Path(tmp_s)
+        old = old_copy(args.old, tmp / "old")
+        # this checkout's kernels compiled too (a no-op when cached), so no design pays numba's compile
+        subprocess.run([sys.executable, "-m", "saucerfab.warmup"], cwd=ROOT, env=_env(ROOT), check=True,
+                       capture_output=True)
+        for k, pair in enumerate(pairs):
+            arms = [("old", old, []), ("new", ROOT, [])] + extra_arms
+            order = arms[k % len(arms):] + arms[:k % len(arms)]  # each arm first in turn
+            row: dict = {"pair": pair}
+            for label, code, extra in order:
+                out = tmp / pair / label
+                d = design(code, pair, out / "design", extra)
+                d["load"] = _load()
+                d["psnr"] = verified(out / "design", out / "print")
+                row[label] = d
+                print(f"{pair} {label}: {d['seconds']:.1f} s (load {d['load']}), stages "
+                      + ", ".join(f"{n} {i} it {s:.1f} s" for n, i, s in d["stages"]), flush=True)
+            rows.append(row)
+    print()
+    for label in ["new"] + [a[0] for a in extra_arms]:
+        print(f"\n### {label} against old")
+        print(f"| pair | old s | {label} s | {label} / old | old stages (it) | {label} stages (it) |")
+        print("|---|---:|---:|---:|---|---|")
+        for r in rows:
+            o, n = r["old"], r[label]
+            print(f"| {r['pair']} | {o['seconds']:.1f} | {n['seconds']:.1f} | {n['seconds'] / o['seconds']:.2f} | "
+                  + " / ".join(str(i) for _, i, _ in o["stages"]) + " | "
+                  + " / ".join(str(i) for _, i, _ in n["stages"]) + " |")
+        tot_o = sum(r["old"]["seconds"] for r in rows)
+        tot_n = sum(r[label]["seconds"] for r in rows)
+        print(f"| all | {tot_o:.1f} | {tot_n:.1f} | {tot_n / tot_o:.2f} | | |")
+        print()
+        print(f"| pair | view | old dB: design / left / right eye | {label} dB | change dB |")
+        print("|---|---|---|---|---|")
+        for r in rows:
+            for view in ("direct", "reflected"):
+                o = [r["old"]["psnr"][f"{view}/{e}"] for e in EYES]
+                n = [r[label]["psnr"][f"{view}/{e}"] for e in EYES]
+                print(f"| {r['pair']} | {view} | " + " / ".join(f"{x:.1f}" for x in o) + " | "
+                      + " / ".join(f"{x:.1f}" for x in n) + " | "
+                      + " / ".join(f"{b - a:+.1f}" for a, b in zip(o, n)) + " |")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"old": args.old, "machine": machine(), "rows": rows}, indent=2))
+    sys.stdout.flush()
+    if not args.no_first_look:
+        print(f"\n## first look (load {_load()})", flush=True)
+        subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_first_look.py"), "--repeat", "3"], check=True)
+    if not args.no_render:
+        print(f"\n## rasterizer (load {_load()})", flush=True)
+        subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_render.py"), "--repeat", "15",
+                        "--torch-repeat", "2"], check=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
