@@ -33,6 +33,13 @@ from saucerfab.profiles import DEFAULT_PRINTER
 QUICK_RES = 128
 QUICK_SPP = 4
 
+#: atlas edge of the trial export a design's quick verify renders (:func:`verify_design`). At
+#: QUICK_RES a view's frame spans 128 px, so 1024 texels across the saucer's top are several per
+#: pixel; the printer's own atlas (4096 for a J55 at 600 dpi) costs a 16x larger bake and texture
+#: load for the same picture (heart-star: 5.2 -> 2.1 s a quick verify, benchmarks/RESULTS.md).
+#: An export's own verify (:func:`finish_print`) always renders the atlas it wrote.
+QUICK_TEXTURE_PX = 1024
+
 
 @dataclass
 class Finished:
@@ -221,8 +228,8 @@ def verify_design(
 ) -> Any:
     """Quick-verify a design folder through a trial export; results in ``design_dir/verify/``.
 
-    The design is exported (OBJ, for ``printer``) to a temporary folder, that
-    print is verified as :func:`finish_print` does, the pictures and
+    The design is exported (OBJ, for ``printer``, with a :data:`QUICK_TEXTURE_PX`
+    atlas) to a temporary folder, that print is verified as :func:`finish_print` does, the pictures and
     ``verify.json`` (with the printer named) go into the design folder's
     ``verify/`` (replaced as a whole) and its ``report.html`` is rewritten
     with them. Returns the :class:`~saucerfab.verify.VerifyResult`.
@@ -230,6 +237,7 @@ def verify_design(
     Raises:
         SaucerfabError: the trial export or the verify cannot be made.
     """
+    from saucerfab.fabricate.options import FabOptions
     from saucerfab.fabricate.pipeline import export_design
     from saucerfab.fileio import atomic_dir
     from saucerfab.report_page import write_design_report
@@ -238,7 +246,7 @@ def verify_design(
     design_dir = Path(design_dir)
     with tempfile.TemporaryDirectory(prefix="saucerfab-trial-") as tmp:
         trial = export_design(design_dir, Path(tmp) / "print", printer=printer, cup_diameter_mm=cup_diameter_mm,
-                              formats=["obj"])
+                              formats=["obj"], options=FabOptions(texture_px=QUICK_TEXTURE_PX))
         with atomic_dir(design_dir / "verify") as vtmp:
             res = verify_print(trial.out, res=QUICK_RES, spp=QUICK_SPP, pictures_dir=vtmp, all_formats=False,
                                progress=progress)
@@ -246,6 +254,7 @@ def verify_design(
             doc["folder"] = "(a trial export of this design)"
             doc["printer"] = trial.printer
             doc["cup_diameter_mm"] = trial.cup_diameter_mm
+            doc["texture_px"] = QUICK_TEXTURE_PX
             (vtmp / "verify.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     write_design_report(design_dir)
     return res

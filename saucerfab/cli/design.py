@@ -241,8 +241,10 @@ def run(args: argparse.Namespace) -> int:
               f"per unit, relief +-{pt['delta_mm']:.2f} mm): minimum feature {pt['min_feature_mm']:g} mm and wall "
               f"{pt['min_wall_mm']:g} mm; {rule}")
     if verified is not None:
-        print(f"  verified a trial export ({req.printer}, OBJ) at {verified.res} px:")
         from saucerfab.cli.verify import view_line
+        from saucerfab.finish import QUICK_TEXTURE_PX
+
+        print(f"  verified a trial export ({req.printer}, OBJ, {QUICK_TEXTURE_PX} px atlas) at {verified.res} px:")
 
         for v in verified.files[0].views:
             print(f"    {view_line(v)}")
