@@ -53,7 +53,7 @@ def option_choices() -> dict[str, Any]:
     from saucerfab.cups import CUP_CLASSES
     from saucerfab.heightfield import BASE_SHAPES
     from saucerfab.images import FITS
-    from saucerfab.optimize.request import ENHANCEMENTS, FRAMES, DesignRequest
+    from saucerfab.optimize.request import ENHANCEMENTS, FRAMES, METHODS, DesignRequest
     from saucerfab.profiles import list_profiles
     from saucerfab.scene import paper_scene
 
@@ -69,6 +69,7 @@ def option_choices() -> dict[str, Any]:
         "fit_rules": dict(FIT_RULES),
         "frames": list(FRAMES),
         "enhancements": list(ENHANCEMENTS),
+        "methods": list(METHODS),
         "defaults": {
             "printer": default("printer"),
             "cup_diameter_mm": paper.cup_diameter_mm,
@@ -79,6 +80,7 @@ def option_choices() -> dict[str, Any]:
             "fit": default("fit"),
             "frames": default("frames"),
             "enhancement": default("enhancement"),
+            "method": default("method"),
             **STUDIO_SWITCHES,
         },
     }

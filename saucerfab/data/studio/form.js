@@ -38,6 +38,8 @@ export class DesignForm {
     setChoices($("#printer"), (o.printers ?? []).map((p) => [p.key, p.name ? `${p.name} (${p.key})` : p.key]));
     setChoices($("#frames"), (o.frames ?? ["inscribed"]).map((f) => [f, f]));
     setChoices($("#enhancement"), (o.enhancements ?? ["auto"]).map((e) => [e, e]));
+    const methodNames = { paper: "The paper's three stages", fast: "Draft (fast)" };
+    setChoices($("#method"), (o.methods ?? ["paper"]).map((m) => [m, methodNames[m] ?? m]));
     const samples = o.samples ?? [];
     $("#load-samples").hidden = !(samples.some((s) => s.role === "direct") && samples.some((s) => s.role === "reflected"));
   }
@@ -63,6 +65,7 @@ export class DesignForm {
     $("#seed").value = 0;
     $("#frames").value = d.frames ?? "inscribed";
     $("#enhancement").value = d.enhancement ?? "auto";
+    $("#method").value = d.method ?? "paper";
     $("#verify-after").checked = d.verify ?? true;
     $("#title").value = "";
     this.syncDependent();
@@ -228,6 +231,7 @@ export class DesignForm {
       printer: $("#printer").value,
       frames: $("#frames").value,
       enhancement: $("#enhancement").value,
+      method: $("#method").value,
       verify: $("#verify-after").checked,
     };
     const title = $("#title").value.trim();
@@ -295,13 +299,14 @@ export class DesignForm {
     set("#seed", o.seed);
     set("#frames", o.frames);
     set("#enhancement", o.enhancement);
+    set("#method", o.method);
     if (typeof o.verify === "boolean") $("#verify-after").checked = o.verify;
     this.syncDependent();
     for (const role of Object.keys(this.uploads)) this.showFile(role, this.uploads[role]);
     this.duplicateOf = run;
     this.showDuplicateNote();
     this.onPicturesChanged();
-    if (["resolution", "image_size", "max_iters", "seed", "frames", "enhancement"].some((k) => k in o)) $("#advanced").open = true;
+    if (["resolution", "image_size", "max_iters", "seed", "frames", "enhancement", "method"].some((k) => k in o)) $("#advanced").open = true;
   }
 
   /** What differs from the run being duplicated (null where an option was dropped). */
