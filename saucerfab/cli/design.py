@@ -76,7 +76,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--method",
         choices=METHODS,
         help=f"how the full method runs: paper runs Algorithm 1's three stages; fast skips the "
-        "small-sigma Laplacian stage, a draft mode (0.5-0.8x the time; the verified pictures moved by -1.6 to +3.5 dB "
+        "small-sigma Laplacian stage, a draft mode (about 0.76x the time; the verified pictures moved by -1.6 to +3.5 dB "
         "on the bundled pairs: benchmarks/RESULTS.md). The ablations always run as the paper wrote them "
         f"(default {default('method')})",
     )

@@ -85,7 +85,7 @@ class DesignRequest(_Weights):
             (:data:`ABLATIONS`, the keys of :data:`saucerfab.optimize.stages.ABLATION_STAGES`).
         method: how the full method runs (:data:`METHODS`): "paper" (the
             default) runs Algorithm 1's three stages; "fast" skips the
-            small-sigma Laplacian stage, a draft mode (0.5-0.8x the time,
+            small-sigma Laplacian stage, a draft mode (about 0.76x the time,
             verified pictures -1.6 to +3.5 dB: benchmarks/RESULTS.md). The
             ablations always run as the paper wrote them ("fast" with one is
             refused). :func:`saucerfab.optimize.stages.stages_for`.

@@ -16,10 +16,11 @@ then texturing (always).
 How the full method runs (:data:`METHODS`, ``--method``): ``"paper"``, the
 default, runs all three stages; ``"fast"`` runs the first and the last and
 skips the small-sigma Laplacian stage, a draft mode for trying pictures: on
-the bundled pairs it took 0.5-0.8x the time and its verified pictures moved
-by -1.6 to +3.5 dB from the design eye (mean about 0; the photographs lost
-up to 1.6 dB), so it is not the default (benchmarks/RESULTS.md, "Design
-speed"). The ablations (Figure 11) always run as the paper wrote them.
+the bundled pairs it took 0.56-0.90x the time (0.76x over all seven) and
+its verified pictures moved by -1.6 to +3.5 dB from the design eye (mean
+about 0; the photographs lost up to 1.6 dB), so it is not the default
+(benchmarks/RESULTS.md, "Design speed in one run"). The ablations (Figure
+11) always run as the paper wrote them.
 """
 
 from __future__ import annotations
