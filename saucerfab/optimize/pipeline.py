@@ -66,6 +66,23 @@ class _StageInterrupted(Exception):
     """Ctrl-C in a stage's solver run; the iterate the stage started from is intact."""
 
 
+def _is_interrupt(exc: BaseException) -> bool:
+    """Whether ``exc`` is a Ctrl-C (SIGINT), as raised or as an extension turned it into its own error.
+
+    Python runs the SIGINT handler between bytecodes; when that is just as a
+    numba kernel returns, CPython reports ``SystemError: ... returned a result
+    with an exception set`` with the KeyboardInterrupt as its cause (seen in the
+    studio's shutdown test under load: the checkpoint was then not saved).
+    """
+    seen = 0
+    cur: BaseException | None = exc
+    while cur is not None and seen < 8:
+        if isinstance(cur, KeyboardInterrupt):
+            return True
+        cur, seen = cur.__cause__ or cur.__context__, seen + 1
+    return False
+
+
 def check_output_folder(out: Path, force: bool = True) -> None:
     """Refuse, before any work, an output path whose replacement would lose a user's data.
 
@@ -484,8 +501,10 @@ class _StageLoop:
         try:
             res = solve(self.objective(spec, target_list), h, c, self.z, delta, settings, prox=prox, callback=cb,
                         project=self.project)
-        except KeyboardInterrupt:
-            raise _StageInterrupted from None
+        except BaseException as exc:
+            if _is_interrupt(exc):
+                raise _StageInterrupted from None
+            raise
         h, c = res.h, res.c
         if res.stop_reason == "nonfinite_gradient":
             print(

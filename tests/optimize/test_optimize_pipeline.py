@@ -82,7 +82,16 @@ def test_bad_inputs_stop_before_work_and_write_nothing(tmp_path) -> None:
     assert not out.exists()
 
 
-def test_ctrl_c_keeps_a_checkpoint_and_resume_gives_the_same_design(small_design, tmp_path) -> None:  # noqa: ANN001
+def _as_numba_surfaces_it() -> None:
+    """A Ctrl-C landing as a numba kernel returns: CPython's SystemError with the KeyboardInterrupt as cause."""
+    try:
+        raise KeyboardInterrupt
+    except KeyboardInterrupt as exc:
+        raise SystemError("CPUDispatcher(<function _face_setup>) returned a result with an exception set") from exc
+
+
+@pytest.mark.parametrize("how", ["KeyboardInterrupt", "SystemError from KeyboardInterrupt"])
+def test_ctrl_c_keeps_a_checkpoint_and_resume_gives_the_same_design(small_design, tmp_path, how) -> None:  # noqa: ANN001
     from saucerfab.errors import Interrupted
 
     req, reference = small_design
@@ -90,7 +99,9 @@ def test_ctrl_c_keeps_a_checkpoint_and_resume_gives_the_same_design(small_design
 
     def interrupt(stage, it, max_it, parts, elapsed):  # noqa: ANN001
         if stage == "bw_sigma_small":
-            raise KeyboardInterrupt
+            if how == "KeyboardInterrupt":
+                raise KeyboardInterrupt
+            _as_numba_surfaces_it()
 
     with pytest.raises(Interrupted):
         run_design(req, out, progress=interrupt, log_every_s=0.0)
@@ -99,6 +110,18 @@ def test_ctrl_c_keeps_a_checkpoint_and_resume_gives_the_same_design(small_design
     run_design(req, out, progress=lambda *a: None)
     assert not (tmp_path / ".design.checkpoint").exists()
     assert np.array_equal(np.load(out / "heights.npy"), np.load(reference / "heights.npy"))
+
+
+def test_an_error_that_is_not_an_interrupt_is_not_taken_for_one(tmp_path) -> None:  # noqa: ANN001
+    req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", resolution=12, image_size=32,
+                        max_iters=3)
+
+    def broken(stage, it, max_it, parts, elapsed):  # noqa: ANN001
+        raise SystemError("a real defect")
+
+    with pytest.raises(SystemError, match="a real defect"):
+        run_design(req, tmp_path / "d", progress=broken, log_every_s=0.0)
+    assert not (tmp_path / ".d.checkpoint" / "state.npz").exists()
 
 
 def test_without_times_the_design_folder_is_byte_identical(tmp_path) -> None:  # noqa: ANN001
