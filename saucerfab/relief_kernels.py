@@ -4,14 +4,15 @@ The optimizer projects every trial step onto printable relief
 (:class:`saucerfab.optimize.printable.CrestProjection`), so the wall rule runs
 hundreds of times a design. Written in numpy it is a handful of whole-grid
 passes per line and step plus a bisection of 30 rounds whose each round is
-about a hundred small numpy calls: 21 ms a trial step on the 150 x 150 grid,
-a fifth of an optimizer iteration (profile, benchmarks/RESULTS.md). Here each
-vertex walks its three mesh lines in a plain loop (under 1 ms a step).
+about a hundred small numpy calls. Here each vertex walks its three mesh
+lines in a plain loop: a whole projection step on the 150 x 150 grid took
+2.2-5.9x less time (``benchmarks/bench_relief.py``; in a design the sparse
+stage, whose spikes make thin crests, about 0.7x: benchmarks/RESULTS.md).
 
 The kernels do the same float64 operations, in the same order, as the numpy
 code they replace, which stays in :mod:`saucerfab.relief` as their reference
 (:func:`~saucerfab.relief.wall_widths_reference`,
-:func:`~saucerfab.relief.lower_until_wide_reference`); the tests hold them
+:func:`~saucerfab.relief.bisect_tops_reference`); the tests hold them
 equal bit for bit, since an optimizer iterate that differs in the last bit
 sends the solver down another path.
 

@@ -393,8 +393,8 @@ def _check_design_options(
 
     The rules are the CLI's own, not copies: the option types are the
     :class:`DesignRequest` field annotations (argparse's ``type=`` on the
-    command line), the value checks are ``DesignRequest``'s and
-    :func:`~saucerfab.optimize.stages.check_weights`' (a weight the ablation does not use), and the
+    command line), the value checks are ``DesignRequest``'s (with
+    :func:`~saucerfab.optimize.stages.check_weights`: a weight no stage uses), and the
     resolution and image-size ranges are those of the scene the run builds
     (:func:`~saucerfab.optimize.prepare.build_scene`, as the design's
     ``prepare`` does). A job with a scene *file* has its overrides checked on
@@ -404,9 +404,6 @@ def _check_design_options(
     """
     from saucerfab.errors import SaucerfabError
     from saucerfab.heightfield import check_height_scale
-    from saucerfab.optimize.energies import WEIGHTS
-    from saucerfab.optimize.stages import check_weights
-
     hints = _request_hints()
     for name, value in sorted(options.items()):
         want = _type_problem(value, hints.get(name))
@@ -414,7 +411,6 @@ def _check_design_options(
             raise ConfigError(f"{where} design_options: {name} must be {want}, got {value!r}")
     try:
         request = DesignRequest(direct=files["direct"], reflected=files["reflected"], **options)
-        check_weights(request.ablation, {w.key: getattr(request, w.key) for w in WEIGHTS}, request.method)
         check_height_scale(request.height_scale)
     except SaucerfabError as exc:
         raise ConfigError(f"{where} design_options: {exc}") from None

@@ -16,10 +16,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from saucerfab.optimize.energies import WEIGHTS
     from saucerfab.optimize.request import (
         ABLATIONS,
-        METHODS,
         COLOR_INITS,
         ENHANCEMENTS,
         FRAMES,
+        METHODS,
         PRISM_PLACEMENTS,
         DesignRequest,
     )
@@ -188,13 +188,10 @@ def run(args: argparse.Namespace) -> int:
 
     from saucerfab.optimize.pipeline import check_output_folder, run_design
     from saucerfab.optimize.request import DesignRequest
-    from saucerfab.optimize.stages import check_weights
 
-    given = given_options(args)
-    check_weights(given.get("ablation", DesignRequest.default("ablation")), given, given.get("method", DesignRequest.default("method")))
+    req = DesignRequest(**given_options(args))  # refuses bad or contradictory options before anything else
     # the library replaces an earlier design folder (batch reruns); the command asks for --force
     check_output_folder(Path(args.out), force=args.force)
-    req = DesignRequest(**given)
     quiet = (lambda *a: None) if args.quiet else None
     out = run_design(req, args.out, progress=quiet, look=None if args.quiet else _first_look_line(args))
     import json

@@ -21,6 +21,21 @@ its verified pictures moved by -1.6 to +3.5 dB from the design eye (mean
 about 0; the photographs lost up to 1.6 dB), so it is not the default
 (benchmarks/RESULTS.md, "Design speed in one run"). The ablations (Figure
 11) always run as the paper wrote them.
+
+One deliberate change from the paper: the sparse stage renders with the
+large sigma (:data:`SIGMA_SPARSE`), not the small one. At sigma 1e-7 a face
+influences pixels only within about 0.1 px of its edges (512 x 512), so once
+the Laplacian term is dropped the visual term gives no usable descent: on
+the bundled samples the line searches failed within 10-16 iterations and the
+moves made raised the final E_visual (7461 -> 7485-7528 over the lambdas,
+prox steps and line-search lengths tried). At sigma 1e-5 the same stage (the
+paper's lambda and alpha) moves 8 % of the vertices and lowers the final
+E_visual by 3.7 % (``benchmarks/bench_sparse_stage.py``; benchmarks/RESULTS.md).
+
+The energies a stage can use are declared in :mod:`saucerfab.optimize.energies`
+(:data:`~saucerfab.optimize.energies.TERMS`); a stage names its regulariser
+and the weight that scales it, and :func:`term_weight` gives every term's
+weight in a stage.
 """
 
 from __future__ import annotations
@@ -187,7 +202,7 @@ def check_weights(ablation: str, given: Mapping[str, float | None], method: str 
         if ablation == "full" and w.key in _every_weight(ablation):
             raise ConfigError(
                 f"{w.option} weighs a stage that --method {method} skips (its stages use {uses}); "
-                f"drop {w.option}, or --method {method} (--method paper runs every stage)"
+                f"drop {w.option}, or give --method paper (it runs every stage)"
             )
         takers = ", ".join(a for a in ABLATION_STAGES if w.key in _every_weight(a))
         raise ConfigError(

@@ -151,7 +151,6 @@ def design_request(ws: Workspace, options: dict[str, Any]) -> Any:
     """
     from saucerfab.heightfield import BASE_SHAPES
     from saucerfab.optimize.request import DesignRequest
-    from saucerfab.optimize.stages import check_weights
     from saucerfab.profiles import list_profiles
     from saucerfab.scene import PRESETS
 
@@ -170,9 +169,6 @@ def design_request(ws: Workspace, options: dict[str, Any]) -> Any:
         raise ConfigError(f"unknown scene {given['scene']!r}; the studio's scenes are {sorted(PRESETS)}")
     if "printer" in given and given["printer"] not in list_profiles():
         raise ConfigError(f"unknown printer {given['printer']!r}; the printers are {sorted(list_profiles())}")
-    ablation = given.get("ablation", DesignRequest.default("ablation"))
-    if isinstance(ablation, str):
-        check_weights(ablation, given, given.get("method", DesignRequest.default("method")))
     try:
         return DesignRequest(**given)
     except (TypeError, ValueError) as exc:  # a value the dataclass could not even compare
