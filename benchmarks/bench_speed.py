@@ -63,7 +63,9 @@ def design(code: Path, pair: str, out: Path, extra: list[str]) -> dict:
     cmd = [sys.executable, "-m", "saucerfab", "design", "--direct", str(SAMPLES / direct), "--reflected",
            str(SAMPLES / reflected), "--out", str(out), "--quiet", *extra]
     t0 = time.perf_counter()
-    subprocess.run(cmd, cwd=code, env=_env(code), check=True, capture_output=True)
+    done = subprocess.run(cmd, cwd=code, env=_env(code), capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed (exit {done.returncode}):\n{done.stderr[-3000:]}")
     seconds = time.perf_counter() - t0
     meta = json.loads((out / "design.json").read_text())
     stages = [(s["name"], s["iterations"], s.get("seconds", float("nan"))) for s in meta["metrics"]["stages"]]
@@ -92,6 +94,8 @@ def main() -> int:
     p.add_argument("--json", help="also write the rows as JSON here")
     p.add_argument("--arm", action="append", default=[], metavar="LABEL=OPTIONS",
                    help="one more configuration of this checkout, e.g. fast='--method fast' (repeatable)")
+    p.add_argument("--no-new", action="store_true",
+                   help="skip this checkout's default (when it is the old one, to compare only the --arm ones)")
     args = p.parse_args()
     pairs = list(PAIRS) if args.pairs == "all" else args.pairs.split(",")
     extra_arms = [(a.split("=", 1)[0], ROOT, shlex.split(a.split("=", 1)[1])) for a in args.arm]
@@ -104,7 +108,7 @@ def main() -> int:
         subprocess.run([sys.executable, "-m", "saucerfab.warmup"], cwd=ROOT, env=_env(ROOT), check=True,
                        capture_output=True)
         for k, pair in enumerate(pairs):
-            arms = [("old", old, []), ("new", ROOT, [])] + extra_arms
+            arms = [("old", old, [])] + ([] if args.no_new else [("new", ROOT, [])]) + extra_arms
             order = arms[k % len(arms):] + arms[:k % len(arms)]  # each arm first in turn
             row: dict = {"pair": pair}
             for label, code, extra in order:
@@ -117,7 +121,7 @@ def main() -> int:
                       + ", ".join(f"{n} {i} it {s:.1f} s" for n, i, s in d["stages"]), flush=True)
             rows.append(row)
     print()
-    for label in ["new"] + [a[0] for a in extra_arms]:
+    for label in ([] if args.no_new else ["new"]) + [a[0] for a in extra_arms]:
         print(f"\n### {label} against old")
         print(f"| pair | old s | {label} s | {label} / old | old stages (it) | {label} stages (it) |")
         print("|---|---:|---:|---:|---|---|")

@@ -107,23 +107,37 @@ def mse_grid(a: np.ndarray, ref: np.ndarray, region: np.ndarray, k: int) -> np.n
     ``N(s) = sum m I_s``, ``A(s) = sum m |a|^2 I_s``, ``B(s) = sum m |r_s|^2``
     and ``C(s) = sum m a . r_s`` are correlations, and
     ``MSE(s) = (A + B - 2 C) / (3 N)``.
+
+    The correlations are products of spectra (scipy.fft: each operand's
+    spectrum taken once, 9 transforms forward and 4 back, where
+    ``scipy.signal.fftconvolve`` would take 18, and without the 0.7 s that
+    importing scipy.signal adds to every design's quick verify).
     """
-    from scipy.signal import fftconvolve
+    from scipy import fft
 
     a = np.asarray(a, np.float64)
     r = np.asarray(ref, np.float64)
     m = np.asarray(region, np.float64)
     h, w = m.shape
+    # linear (not circular) correlation: transforms at least the full output's size
+    shape = [fft.next_fast_len(2 * h - 1, real=True), fft.next_fast_len(2 * w - 1, real=True)]
 
-    def xcorr(f: np.ndarray, g: np.ndarray) -> np.ndarray:
-        full = fftconvolve(f, g[::-1, ::-1], mode="full")  # full[(h-1) + dy, (w-1) + dx] = sum f(x) g(x - s)
+    def spectrum(f: np.ndarray) -> np.ndarray:
+        return fft.rfft2(f, shape)
+
+    def window(product: np.ndarray) -> np.ndarray:
+        # full[(h-1) + dy, (w-1) + dx] = sum_x f(x) g(x - s): the shifts within k
+        full = fft.irfft2(product, shape)
         return full[h - 1 - k : h + k, w - 1 - k : w + k]
 
-    ones = np.ones((h, w))
-    n = xcorr(m, ones)
-    a2 = xcorr(m * (a * a).sum(-1), ones)
-    b2 = xcorr(m, (r * r).sum(-1))
-    c = sum(xcorr(m * a[..., ch], r[..., ch]) for ch in range(a.shape[2]))
+    def flipped(g: np.ndarray) -> np.ndarray:
+        return spectrum(g[::-1, ::-1])
+
+    s_m, s_ones = spectrum(m), flipped(np.ones((h, w)))
+    n = window(s_m * s_ones)
+    a2 = window(spectrum(m * (a * a).sum(-1)) * s_ones)
+    b2 = window(s_m * flipped((r * r).sum(-1)))
+    c = window(sum(spectrum(m * a[..., ch]) * flipped(r[..., ch]) for ch in range(a.shape[2])))
     n = np.rint(n)
     with np.errstate(divide="ignore", invalid="ignore"):
         mse = np.maximum(a2 + b2 - 2 * c, 0.0) / (a.shape[2] * n)
