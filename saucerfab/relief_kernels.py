@@ -16,8 +16,11 @@ code they replace, which stays in :mod:`saucerfab.relief` as their reference
 equal bit for bit, since an optimizer iterate that differs in the last bit
 sends the solver down another path.
 
-Compiled code is cached on disk (``cache=True``); serial, since one call is
-well under a millisecond of work per thousand vertices.
+Compiled code is cached on disk (``cache=True``). The two entry points run
+their vertices (crests) on numba's worker threads: each result is computed
+by one thread alone, so it does not depend on the thread count; with two
+threads a projection step took 1.5-2x less than serial (1.7 against 2.7 ms
+with nothing to blunt, 5.6 against 9.9 ms with 2 % spikes).
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 #: the three mesh lines (along x, along y, the cell diagonal): grid offsets; their
 #: lengths and what lies beyond the border come from the caller (relief._WALL_LINES)
@@ -72,18 +75,20 @@ def _vertex_width(h: np.ndarray, i: int, j: int, top: float, depth: float, lengt
     return w
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def wall_widths_grid(h: np.ndarray, depth: float, lengths: np.ndarray, beyond: np.ndarray, k_max: int,
                      rise_tol: float) -> np.ndarray:
     """(N, M) float64 widths of every vertex's crest at ``depth`` below it (relief.wall_widths)."""
     out = np.empty(h.shape)
-    for i in range(h.shape[0]):
+    # rows on the worker threads: each vertex's width is its own, so the result does not
+    # depend on the thread count (1.1 -> 0.6 ms on 150 x 150 with two)
+    for i in prange(h.shape[0]):
         for j in range(h.shape[1]):
             out[i, j] = _vertex_width(h, i, j, h[i, j], depth, lengths, beyond, k_max, False, rise_tol)
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def bisect_tops(h: np.ndarray, ii: np.ndarray, jj: np.ndarray, lo_vals: np.ndarray, depth: float, want: float,
                 k_max: int, lengths: np.ndarray, beyond: np.ndarray, rounds: int) -> tuple[np.ndarray, np.ndarray]:
     """Per thin crest (ii, jj): the highest top at which it is ``want`` wide ``depth`` below (bisection).
@@ -95,7 +100,7 @@ def bisect_tops(h: np.ndarray, ii: np.ndarray, jj: np.ndarray, lo_vals: np.ndarr
     k = ii.shape[0]
     lo_top = np.empty(k)
     ok_low = np.empty(k, np.bool_)
-    for t in range(k):
+    for t in prange(k):  # each crest's bisection is its own
         i, j = ii[t], jj[t]
         hi = h[i, j]
         lo = np.maximum(lo_vals[t], hi - 16.0 * depth)
