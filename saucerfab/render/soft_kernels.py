@@ -42,12 +42,13 @@ from saucerfab.render._simd import (
 from saucerfab.render.soft_common import SoftParams, WSUM_EPS
 from saucerfab.render.soft_tiles import JIT_OPTS, LANES, N_GRAD, NLOC, SW, TILE_H, TILE_W
 
-#: pairs per iteration of the forward's pair loop: two lane groups, which LLVM
-#: vectorizes as one AVX-512 register of float32 (on AVX2, two). Forward alone,
-#: one thread, both views: 35.2-37.0 -> 27.3-29.6 ms at sigma 1e-5 and 19.4-19.6
-#: -> 18.3-19.1 ms at 1e-7, the same bits. The backward keeps single lane groups:
-#: at two (its terms stored and added in the same order, to keep its bits) it was
-#: 5-10 % faster at 1e-5 and 10-80 % slower at 1e-7.
+#: pairs per iteration of the forward's pair loop: two lane groups (one AVX-512
+#: register of float32, two AVX2 ones), the same bits as one. Forward alone, one
+#: thread, both views: 35.2-37.0 -> 27.3-29.6 ms at sigma 1e-5 and 19.4-19.6 ->
+#: 18.3-19.1 ms at 1e-7; compiled for AVX2 only (NUMBA_CPU_NAME=haswell)
+#: 34.5-35.2 -> 26.1-27.4 and 18.9-19.5 -> 16.6-17.4 ms. The backward keeps single
+#: lane groups: at two (its terms stored and added in the same order, to keep its
+#: bits) it was 5-10 % faster at 1e-5 and 10-80 % slower at 1e-7.
 GROUP = 2 * LANES
 #: lanes of the kernels' flat scratch per field: every pair of one entry, and room
 #: for the last pair group
