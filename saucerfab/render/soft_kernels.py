@@ -9,8 +9,9 @@ setup and the autograd glue are :mod:`saucerfab.render.soft_numba`'s.
   each row's first to last kept pair, which the forward records), with the
   8-lane vector copies of :mod:`saucerfab.render._simd`; the pairs are then
   rendered in full groups (the forward: :data:`GROUP`, two lane groups; the
-  backward: ``LANES``) and the forward's state is blended back. A face's rows are short (1-4 pixels at sigma 1e-7, 5-9 at 1e-5), and a
-  group per row left most lanes idle.
+  backward: ``LANES``) and the forward's state is blended back. A face's rows
+  are short (1-4 pixels at sigma 1e-7, 5-9 at 1e-5), and a group per row left
+  most lanes idle.
 * The innermost loop runs over one group at a time (a loop of a fixed number
   of iterations, which LLVM vectorizes exactly that wide), branch-free
   (selects and masks; lanes past the entry's pairs are masked out like
