@@ -150,6 +150,24 @@ def test_solver_stops_on_a_nonfinite_gradient() -> None:
     assert torch.equal(res.h, z)
 
 
+def test_solver_ends_at_once_when_a_fresh_direction_is_rejected() -> None:
+    # Every move raises the energy (|c - c0| outweighs the linear pull), so the
+    # first line search fails. Its direction came from fresh moments, which a
+    # retry would make again from the same iterate: the stage ends after one
+    # line search, not max_rejections of them, and the iterate is the start.
+    z = torch.zeros(4, dtype=torch.float64)
+    c0 = torch.full((4, 3), 0.4, dtype=torch.float64)
+
+    def objective(h: torch.Tensor, c: torch.Tensor):
+        return (c - c0).abs().sum() + 0.1 * c.sum() + (h**2).sum(), {}
+
+    settings = SolverSettings(max_iters=20, max_rejections=4, max_backtracks=3)
+    res = solve(objective, z.clone(), c0, z, 0.05, settings)
+    assert res.stop_reason == "no_descent" and res.iterations == 1
+    assert res.evaluations == 1 + (settings.max_backtracks + 1)
+    assert torch.equal(res.h, z) and torch.equal(res.c, c0)
+
+
 def test_solver_rejects_infeasible_start() -> None:
     objective, target_h, _ = _quadratic_problem()
     z = torch.zeros_like(target_h)
