@@ -20,7 +20,7 @@ rendered the same way (so pixels no saucer covers count for nothing).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -90,11 +90,15 @@ def _hard(verts: np.ndarray, faces: np.ndarray, cam: Camera) -> tuple[np.ndarray
     return np.asarray(fid), np.asarray(depth)
 
 
-def view_images(design: Design, rig: "Rig", size: int | None = None) -> dict[str, np.ndarray]:
-    """Hard textured renders of each view: name -> (S, S, 3) float in [0, 1]."""
+def view_images(
+    design: Design, rig: "Rig", size: int | None = None, names: Collection[str] | None = None
+) -> dict[str, np.ndarray]:
+    """Hard textured renders of each view (or of those in ``names``): name -> (S, S, 3) float in [0, 1]."""
     h = design.heights.reshape(-1)
     out = {}
     for view in rig.views:
+        if names is not None and view.name not in names:
+            continue
         cam = view.camera if size is None else view.camera.with_size(size)
         if view.faces.shape[0] == 0:
             out[view.name] = np.ones((cam.image_size, cam.image_size, 3))
@@ -146,8 +150,15 @@ def compose(scene: "Scene", rig: "ViewMeshes", heights: np.ndarray, cam: Camera,
     return img
 
 
-def final_visual_error(design: Design, rig: "Rig", prep: "Prepared") -> dict[str, float]:
-    """E_visual (eq. 2) of hard renders, result vs inputs projected on the base shape."""
+def final_visual_error(
+    design: Design, rig: "Rig", prep: "Prepared", views: dict[str, np.ndarray] | None = None
+) -> dict[str, float]:
+    """E_visual (eq. 2) of hard renders, result vs inputs projected on the base shape.
+
+    Args:
+        views: :func:`view_images` of ``design`` at each view's own size, when the caller has them
+            (the previews): a view already rendered at the size compared here is not rendered again.
+    """
     from saucerfab.optimize.texturing import texture_saucer
 
     base_design = Design(
@@ -162,7 +173,9 @@ def final_visual_error(design: Design, rig: "Rig", prep: "Prepared") -> dict[str
     base_design.texture, base_design.face_uvs = ref_tex.texture, ref_tex.face_uvs
     size = prep.render["direct"].shape[0]
     want = view_images(base_design, rig, size)
-    got = view_images(design, rig, size)
+    have = {name: img for name, img in (views or {}).items() if img.shape[0] == size}  # same camera, same render
+    fresh = view_images(design, rig, size, names=[v.name for v in rig.views if v.name not in have])
+    got = {v.name: have[v.name] if v.name in have else fresh[v.name] for v in rig.views}
     per = {f"E_visual_final_{k}": float(((want[k] - got[k]) ** 2).sum()) for k in got}
     per["E_visual_final"] = float(sum(per.values()))
     return per
@@ -207,4 +220,4 @@ def make_previews(
     pngs["optimized_colors.png"] = report.to_png_bytes(report.side_by_side(opt_panels))
     if log:
         pngs["energies.png"] = report.energy_plot(log)
-    return pngs, final_visual_error(design, rig, prep)
+    return pngs, final_visual_error(design, rig, prep, views)
