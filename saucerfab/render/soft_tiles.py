@@ -65,7 +65,9 @@ def _face_boxes(cxy: np.ndarray, radius: float, size: int) -> np.ndarray:  # pra
         x2, y2 = float(cxy[f, 4]), float(cxy[f, 5])
         lox, hix = min(x0, x1, x2), max(x0, x1, x2)
         loy, hiy = min(y0, y1, y2), max(y0, y1, y2)
-        if not (np.isfinite(lox) and np.isfinite(hix) and np.isfinite(loy) and np.isfinite(hiy)):
+        # every corner tested: min and max may pass over a NaN (its comparisons are false)
+        finite = np.isfinite(x0) and np.isfinite(x1) and np.isfinite(x2)
+        if not (finite and np.isfinite(y0) and np.isfinite(y1) and np.isfinite(y2)):
             out[f, 0], out[f, 1], out[f, 2], out[f, 3] = 0, -1, 0, -1
             continue
         # clamp before rounding so far-off faces cannot overflow the integers
@@ -89,6 +91,11 @@ def _bin_faces(box: np.ndarray, n_ty: int, n_tx: int):  # type: ignore[no-untype
     contiguous, so its gradient slots are summed in a fixed order), each tile's
     entries are in increasing face order, and entry e's rows within its tile have
     the slots row_start[e] .. row_start[e+1]-1 of the per-row valid ranges.
+
+    One thread, face after face: a version laying the faces out on the worker
+    threads from prefix sums (then a counting sort by tile) took 1.6 ms
+    against 0.7-0.9 ms for the 57,457 entries of the bench's direct view.
+    ``tests/render/test_soft_tiles.py`` holds it to a written-out reference.
     """
     n = box.shape[0]
     n_tiles = n_ty * n_tx
