@@ -23,6 +23,31 @@ def test_e_visual_is_sum_of_squares_over_views() -> None:
     assert float(e_visual([a, c], [b, d])) == pytest.approx(3.25)
 
 
+@pytest.mark.parametrize("weight", [1.0, 0.37])
+def test_e_visual_value_and_gradient_are_the_plain_expression_bit_for_bit(weight: float) -> None:
+    # e_visual's one-multiply backward against autograd through the expression it replaces
+    g = torch.Generator().manual_seed(1)
+    rendered = [torch.rand(16, 16, 3, generator=g) for _ in range(2)]
+    targets = [torch.rand(16, 16, 3, generator=g) for _ in range(2)]
+    grads = []
+    for fused in (True, False):
+        rs = [r.clone().requires_grad_(True) for r in rendered]
+        if fused:
+            e = e_visual(rs, targets)
+        else:
+            e = rs[0].new_zeros((), dtype=torch.float64)
+            for r, t in zip(rs, targets):
+                e = e + ((r - t) ** 2).sum(dtype=torch.float64)
+        (weight * e).backward()
+        grads.append((float(e.detach()), [r.grad for r in rs]))
+    (v1, g1), (v2, g2) = grads
+    assert v1 == v2 and all(torch.equal(a, b) for a, b in zip(g1, g2))
+    # float64 gradcheck, both inputs (a target that requires grad gets the opposite gradient)
+    r = torch.rand(3, 2, 3, dtype=torch.float64, generator=g, requires_grad=True)
+    t = torch.rand(3, 2, 3, dtype=torch.float64, generator=g, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda a, b: e_visual([a], [b]), (r, t))
+
+
 def test_e_deform_hand_computed_on_3x3() -> None:
     # n = 3: the centre vertex (index 4) has 6 mesh neighbours: 1, 3, 5, 7 and
     # the diagonal 0 and 8 (cells split from (i, j) to (i+1, j+1)).
