@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_speed.py --old cdd73fc --arm fast='--method fast'   # every bundled pair
     .venv/bin/python benchmarks/bench_speed.py --old cdd73fc --pairs heart-star --no-render --no-first-look
+    .venv/bin/python benchmarks/bench_speed.py --old HEAD --no-new --noise 2 --arm fast='--method fast'
 
 For each pair, ``saucerfab design`` exactly as a user types it (defaults,
 its quick verify included) by the old code (``--old``: a git revision,
@@ -14,6 +15,11 @@ the design eye and a viewer's two eyes (the same instrument for both), and
 each row gives design seconds, the stages' iterations and the PSNR per view
 and eye. Then, in the same run, ``bench_first_look.py --repeat 3`` and
 ``bench_render.py --repeat 15 --torch-repeat 2`` (their own tables).
+
+``--noise K``: per pair, K more designs of this checkout from a start moved
+by a rounding-level amount (``perturbed_design.py``, seeds 1..K), verified
+the same way: how far the verified pictures move by the optimizer's path
+alone, the yardstick for any change that alters the path.
 
 Times are wall-clock on a shared machine: the ratio within a pair is the
 figure; the load average is printed at each step.
@@ -57,10 +63,15 @@ def _env(code: Path) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": str(code)}
 
 
-def design(code: Path, pair: str, out: Path, extra: list[str]) -> dict:
-    """``saucerfab design`` of ``pair`` by the code in ``code`` (as typed, plus ``extra``); seconds and stages."""
+def design(code: Path, pair: str, out: Path, extra: list[str], noise_seed: int | None = None) -> dict:
+    """``saucerfab design`` of ``pair`` by the code in ``code`` (as typed, plus ``extra``); seconds and stages.
+
+    ``noise_seed``: through ``perturbed_design.py`` with that seed (its start moved by a rounding-level amount).
+    """
     direct, reflected = PAIRS[pair]
-    cmd = [sys.executable, "-m", "saucerfab", "design", "--direct", str(SAMPLES / direct), "--reflected",
+    entry = (["-m", "saucerfab"] if noise_seed is None
+             else [str(ROOT / "benchmarks" / "perturbed_design.py"), str(noise_seed)])
+    cmd = [sys.executable, *entry, "design", "--direct", str(SAMPLES / direct), "--reflected",
            str(SAMPLES / reflected), "--out", str(out), "--quiet", *extra]
     t0 = time.perf_counter()
     done = subprocess.run(cmd, cwd=code, env=_env(code), capture_output=True, text=True)
@@ -81,6 +92,41 @@ def verified(design_dir: Path, print_dir: Path) -> dict[str, float]:
     return {f"{v.view}/{v.eye}": v.psnr_db for v in res.files[0].views}
 
 
+def print_noise(rows: list[dict], k: int, arms: list[str]) -> None:
+    """The path-noise table: per pair, view and eye, this checkout's default (``new``,
+    else ``old``) and its K perturbed designs; then each ``--arm``'s change set
+    against that spread."""
+    base = "new" if "new" in rows[0] else "old"
+    labels = [f"noise{j}" for j in range(1, k + 1)]
+    print(f"\n### path noise: {base} and {k} rounding-level perturbed starts")
+    print(f"| pair | view | eye | {base} dB | perturbed dB | change dB |")
+    print("|---|---|---|---:|---|---|")
+    deltas: dict[str, list[float]] = {e: [] for e in EYES}
+    for r in rows:
+        for view in ("direct", "reflected"):
+            for e in EYES:
+                b = r[base]["psnr"][f"{view}/{e}"]
+                ps = [r[lab]["psnr"][f"{view}/{e}"] for lab in labels]
+                deltas[e] += [p - b for p in ps]
+                print(f"| {r['pair']} | {view} | {e} | {b:.1f} | " + " / ".join(f"{p:.1f}" for p in ps) + " | "
+                      + " / ".join(f"{p - b:+.1f}" for p in ps) + " |")
+    print()
+    print("| eye | perturbed - default: mean dB | RMS dB | largest drop dB | largest gain dB | drops over 0.5 dB |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for e in EYES:
+        d = deltas[e]
+        rms = (sum(x * x for x in d) / len(d)) ** 0.5
+        print(f"| {e} | {sum(d) / len(d):+.2f} | {rms:.2f} | {min(d):+.1f} | {max(d):+.1f} | "
+              f"{sum(x < -0.5 for x in d)} of {len(d)} |")
+    for arm in arms:
+        print(f"\n{arm} against {base}, per eye (mean / RMS / largest drop / drops over 0.5 dB):")
+        for e in EYES:
+            d = [r[arm]["psnr"][f"{v}/{e}"] - r[base]["psnr"][f"{v}/{e}"] for r in rows
+                 for v in ("direct", "reflected")]
+            rms = (sum(x * x for x in d) / len(d)) ** 0.5
+            print(f"  {e}: {sum(d) / len(d):+.2f} / {rms:.2f} / {min(d):+.1f} / {sum(x < -0.5 for x in d)} of {len(d)}")
+
+
 def _load() -> str:
     return f"{os.getloadavg()[0]:.1f}"
 
@@ -96,6 +142,9 @@ def main() -> int:
                    help="one more configuration of this checkout, e.g. fast='--method fast' (repeatable)")
     p.add_argument("--no-new", action="store_true",
                    help="skip this checkout's default (when it is the old one, to compare only the --arm ones)")
+    p.add_argument("--noise", type=int, default=0, metavar="K",
+                   help="K more designs per pair of this checkout from rounding-level perturbed starts "
+                        "(perturbed_design.py): the optimizer's path noise in verified dB")
     args = p.parse_args()
     pairs = list(PAIRS) if args.pairs == "all" else args.pairs.split(",")
     extra_arms = [(a.split("=", 1)[0], ROOT, shlex.split(a.split("=", 1)[1])) for a in args.arm]
@@ -108,12 +157,14 @@ def main() -> int:
         subprocess.run([sys.executable, "-m", "saucerfab.warmup"], cwd=ROOT, env=_env(ROOT), check=True,
                        capture_output=True)
         for k, pair in enumerate(pairs):
-            arms = [("old", old, [])] + ([] if args.no_new else [("new", ROOT, [])]) + extra_arms
+            arms = [("old", old, [], None)] + ([] if args.no_new else [("new", ROOT, [], None)])
+            arms += [(label, code, extra, None) for label, code, extra in extra_arms]
+            arms += [(f"noise{j}", ROOT, [], j) for j in range(1, args.noise + 1)]
             order = arms[k % len(arms):] + arms[:k % len(arms)]  # each arm first in turn
             row: dict = {"pair": pair}
-            for label, code, extra in order:
+            for label, code, extra, seed in order:
                 out = tmp / pair / label
-                d = design(code, pair, out / "design", extra)
+                d = design(code, pair, out / "design", extra, seed)
                 d["load"] = _load()
                 d["psnr"] = verified(out / "design", out / "print")
                 row[label] = d
@@ -143,6 +194,8 @@ def main() -> int:
                 print(f"| {r['pair']} | {view} | " + " / ".join(f"{x:.1f}" for x in o) + " | "
                       + " / ".join(f"{x:.1f}" for x in n) + " | "
                       + " / ".join(f"{b - a:+.1f}" for a, b in zip(o, n)) + " |")
+    if args.noise:
+        print_noise(rows, args.noise, [a[0] for a in extra_arms])
     if args.json:
         Path(args.json).write_text(json.dumps({"old": args.old, "machine": machine(), "rows": rows}, indent=2))
     sys.stdout.flush()
