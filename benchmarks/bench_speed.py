@@ -146,6 +146,8 @@ def main() -> int:
                    help="K more designs per pair of this checkout from rounding-level perturbed starts "
                         "(perturbed_design.py): the optimizer's path noise in verified dB")
     args = p.parse_args()
+    if args.noise < 0:
+        p.error(f"--noise must be 0 or more designs per pair, got {args.noise}")
     pairs = list(PAIRS) if args.pairs == "all" else args.pairs.split(",")
     extra_arms = [(a.split("=", 1)[0], ROOT, shlex.split(a.split("=", 1)[1])) for a in args.arm]
     print(f"machine: {machine()}; old = {args.old}, new = this checkout; start load {_load()}", flush=True)

@@ -29,6 +29,10 @@ def main(argv: list[str]) -> int:
     from saucerfab.cli import main as cli_main
     from saucerfab.optimize import pipeline
 
+    if not argv or not argv[0].isdigit():
+        print("usage: perturbed_design.py SEED design --direct A.png --reflected B.png --out DIR ... "
+              "(SEED: a whole number >= 0)", file=sys.stderr)
+        return 2
     seed, rest = int(argv[0]), argv[1:]
     start = pipeline._StageLoop.start
 
