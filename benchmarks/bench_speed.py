@@ -1,8 +1,8 @@
 """Issue 18 in one run: old and new default design times with verified quality, the first look, the rasterizer.
 
-    .venv/bin/python benchmarks/bench_speed.py --old cdd73fc --arm fast='--method fast'   # every bundled pair
+    .venv/bin/python benchmarks/bench_speed.py --old cdd73fc --arm paper='--method paper'   # every bundled pair
     .venv/bin/python benchmarks/bench_speed.py --old cdd73fc --pairs heart-star --no-render --no-first-look
-    .venv/bin/python benchmarks/bench_speed.py --old HEAD --no-new --noise 2 --arm fast='--method fast'
+    .venv/bin/python benchmarks/bench_speed.py --old HEAD --no-new --noise 2 --arm paper='--method paper'
 
 For each pair, ``saucerfab design`` exactly as a user types it (defaults,
 its quick verify included) by the old code (``--old``: a git revision,
@@ -19,7 +19,11 @@ and eye. Then, in the same run, ``bench_first_look.py --repeat 3`` and
 ``--noise K``: per pair, K more designs of this checkout from a start moved
 by a rounding-level amount (``perturbed_design.py``, seeds 1..K), verified
 the same way: how far the verified pictures move by the optimizer's path
-alone, the yardstick for any change that alters the path.
+alone, the yardstick for any change that alters the path. With
+``--arm-noise`` each ``--arm`` gets its K perturbed starts too (labels
+``LABEL~1``..``LABEL~K``), and a last table compares each arm with the
+default on the mean over the K + 1 starts of each: a change of method read
+through the path noise rather than from one start of each.
 
 Times are wall-clock on a shared machine: the ratio within a pair is the
 figure; the load average is printed at each step.
@@ -127,6 +131,43 @@ def print_noise(rows: list[dict], k: int, arms: list[str]) -> None:
             print(f"  {e}: {sum(d) / len(d):+.2f} / {rms:.2f} / {min(d):+.1f} / {sum(x < -0.5 for x in d)} of {len(d)}")
 
 
+def print_start_means(rows: list[dict], k: int, arms: list[str]) -> None:
+    """Each ``--arm`` against this checkout's default, on the mean verified PSNR over K + 1 starts of each.
+
+    One start of each moves a view by the path noise (``print_noise``); the
+    mean over K + 1 starts moves by about 1/sqrt(K + 1) of it, so a change
+    of method shows through it.
+    """
+    base = "new" if "new" in rows[0] else "old"
+    base_runs = [base] + [f"noise{j}" for j in range(1, k + 1)]
+
+    def mean(r: dict, runs: list[str], key: str) -> float:
+        return sum(r[x]["psnr"][key] for x in runs) / len(runs)
+
+    for arm in arms:
+        runs = [arm] + [f"{arm}~{j}" for j in range(1, k + 1)]
+        print(f"\n### {arm} against {base}: mean over {k + 1} starts of each")
+        print(f"| pair | view | {base} dB: design / left / right eye | {arm} dB | change dB |")
+        print("|---|---|---|---|---|")
+        deltas: dict[str, list[float]] = {e: [] for e in EYES}
+        for r in rows:
+            for view in ("direct", "reflected"):
+                b = [mean(r, base_runs, f"{view}/{e}") for e in EYES]
+                a = [mean(r, runs, f"{view}/{e}") for e in EYES]
+                for e, x, y in zip(EYES, b, a):
+                    deltas[e].append(y - x)
+                print(f"| {r['pair']} | {view} | " + " / ".join(f"{x:.1f}" for x in b) + " | "
+                      + " / ".join(f"{y:.1f}" for y in a) + " | "
+                      + " / ".join(f"{y - x:+.1f}" for x, y in zip(b, a)) + " |")
+        secs = {lab: sum(r[x]["seconds"] for r in rows for x in rs) / len(rs)
+                for lab, rs in ((base, base_runs), (arm, runs))}
+        print(f"\nper eye (mean / largest drop / drops over 0.5 dB); seconds per start, all pairs: "
+              f"{base} {secs[base]:.1f}, {arm} {secs[arm]:.1f}")
+        for e in EYES:
+            d = deltas[e]
+            print(f"  {e}: {sum(d) / len(d):+.2f} / {min(d):+.1f} / {sum(x < -0.5 for x in d)} of {len(d)}")
+
+
 def _load() -> str:
     return f"{os.getloadavg()[0]:.1f}"
 
@@ -139,15 +180,19 @@ def main() -> int:
     p.add_argument("--no-render", action="store_true")
     p.add_argument("--json", help="also write the rows as JSON here")
     p.add_argument("--arm", action="append", default=[], metavar="LABEL=OPTIONS",
-                   help="one more configuration of this checkout, e.g. fast='--method fast' (repeatable)")
+                   help="one more configuration of this checkout, e.g. paper='--method paper' (repeatable)")
     p.add_argument("--no-new", action="store_true",
                    help="skip this checkout's default (when it is the old one, to compare only the --arm ones)")
+    p.add_argument("--arm-noise", action="store_true",
+                   help="with --noise K, K perturbed starts of every --arm too, and a table of means over the starts")
     p.add_argument("--noise", type=int, default=0, metavar="K",
                    help="K more designs per pair of this checkout from rounding-level perturbed starts "
                         "(perturbed_design.py): the optimizer's path noise in verified dB")
     args = p.parse_args()
     if args.noise < 0:
         p.error(f"--noise must be 0 or more designs per pair, got {args.noise}")
+    if args.arm_noise and not (args.noise and args.arm):
+        p.error("--arm-noise gives each --arm the --noise K perturbed starts: give --noise K and an --arm too")
     pairs = list(PAIRS) if args.pairs == "all" else args.pairs.split(",")
     extra_arms = [(a.split("=", 1)[0], ROOT, shlex.split(a.split("=", 1)[1])) for a in args.arm]
     print(f"machine: {machine()}; old = {args.old}, new = this checkout; start load {_load()}", flush=True)
@@ -162,6 +207,9 @@ def main() -> int:
             arms = [("old", old, [], None)] + ([] if args.no_new else [("new", ROOT, [], None)])
             arms += [(label, code, extra, None) for label, code, extra in extra_arms]
             arms += [(f"noise{j}", ROOT, [], j) for j in range(1, args.noise + 1)]
+            if args.arm_noise:
+                arms += [(f"{label}~{j}", code, extra, j) for label, code, extra in extra_arms
+                         for j in range(1, args.noise + 1)]
             order = arms[k % len(arms):] + arms[:k % len(arms)]  # each arm first in turn
             row: dict = {"pair": pair}
             for label, code, extra, seed in order:
@@ -198,6 +246,8 @@ def main() -> int:
                       + " / ".join(f"{b - a:+.1f}" for a, b in zip(o, n)) + " |")
     if args.noise:
         print_noise(rows, args.noise, [a[0] for a in extra_arms])
+    if args.arm_noise:
+        print_start_means(rows, args.noise, [a[0] for a in extra_arms])
     if args.json:
         Path(args.json).write_text(json.dumps({"old": args.old, "machine": machine(), "rows": rows}, indent=2))
     sys.stdout.flush()

@@ -14,6 +14,7 @@ HELP = "optimize a saucer: direct + reflected image and a base shape -> design f
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options; every design option defaults to None ("not given") and its default is DesignRequest's."""
     from saucerfab.optimize.energies import WEIGHTS
+    from saucerfab.optimize.stages import STAGE_CAPS
     from saucerfab.optimize.request import (
         ABLATIONS,
         COLOR_INITS,
@@ -66,7 +67,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reflected2-mask", help="foreground mask for the second reflected image")
     for w in WEIGHTS:  # one option per declared weight of an energy term
         p.add_argument(w.option, type=float, help=f"{w.help} (default {w.default_text()})")
-    p.add_argument("--max-iters", type=int, help=f"iteration cap per stage (default {default('max_iters')})")
+    p.add_argument(
+        "--max-iters",
+        type=int,
+        help="iteration cap for every stage (default: the method's, for pictures with a clear subject / "
+        "photographs: " + ", ".join(f"{m} {a}/{b}" for m, (a, b) in STAGE_CAPS.items())
+        + "; a stage also stops when it converges)",
+    )
     p.add_argument(
         "--ablation",
         choices=ABLATIONS,
@@ -75,9 +82,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--method",
         choices=METHODS,
-        help=f"how the full method runs: paper runs Algorithm 1's three stages; fast skips the "
-        "small-sigma Laplacian stage, a draft mode (about 0.76x the time; the verified pictures moved by -1.6 to +3.5 dB "
-        "on the bundled pairs: benchmarks/RESULTS.md). The ablations always run as the paper wrote them "
+        help="how the full method runs: auto skips the small-sigma Laplacian stage for pictures with a clear "
+        f"subject (the black-white enhancement; {STAGE_CAPS['auto'][0]} iterations a stage) and runs it for "
+        f"photographs ({STAGE_CAPS['auto'][1]} a stage), which gain from it where the others do not; fast always "
+        f"skips it; paper runs Algorithm 1's three stages as written, {STAGE_CAPS['paper'][0]} iterations each at "
+        "most (measured in benchmarks/RESULTS.md). The ablations always run as the paper wrote them "
         f"(default {default('method')})",
     )
     p.add_argument(
@@ -209,6 +218,18 @@ def run(args: argparse.Namespace) -> int:
     if enh.get("strategy") in ("subject", "none"):
         what = "black-white enhancement" if enh["strategy"] == "subject" else "no enhancement (the pictures as they are)"
         print(f"  {what}: {enh.get('why', '')}")
+    par = meta.get("parameters", {})
+    if par.get("method_used"):  # which stages ran, and why (the product's choice under the default, auto)
+        from saucerfab.optimize.stages import SIGMA_SMALL
+
+        names = [s["name"] for s in par.get("stages", [])]
+        small = any(s["regulariser"] == "deform" and s["sigma"] == SIGMA_SMALL for s in par.get("stages", []))
+        why = ""
+        if par["method_used"] == "auto":
+            why = (" (the small-sigma stage run: these pictures are used as they are)" if small
+                   else " (the small-sigma stage skipped: these pictures have a clear subject)")
+        print(f"  method {par['method_used']}{' (the default)' if par.get('method') == 'auto' else ''}: "
+              f"{', '.join(names)}{why}, at most {par['max_iters_used']} iterations a stage")
     for st in m.get("stages", []):
         print(
             f"  {st['name']:22s} {st['iterations']:4d} it  {st.get('seconds', float('nan')):6.1f} s  "

@@ -46,6 +46,8 @@ from saucerfab.optimize.stages import (
     SIGMA_LARGE,
     WEIGHT_FACTORS,
     StageSpec,
+    check_weights,
+    method_used,
     stages_for,
     term_weight,
     without_enhancement,
@@ -209,8 +211,11 @@ def run_design(
     t_start = time.perf_counter()
     check_output_folder(out)
     prep = prepare(request)
-    stages = stages_for(request.ablation, request.method)
-    if prep.enhancement and prep.enhancement["strategy"] == "none":
+    enhanced = _enhanced(prep)
+    # a weight of a stage these pictures skip would be ignored: refused now, before any stage
+    check_weights(request.ablation, {w.key: getattr(request, w.key) for w in WEIGHTS}, request.method, enhanced)
+    stages = stages_for(request.ablation, request.method, enhanced)
+    if not enhanced:
         stages = without_enhancement(stages)
     ckpt = _Checkpoint(out, request_hash(request, prep))
     for note in prep.print_notes:
@@ -327,6 +332,7 @@ class _StageLoop:
         from saucerfab.optimize.targets import compatibility
 
         self.request, self.prep, self.rig, self.stages = request, prep, rig, stages
+        self.cap = request.stage_cap(_enhanced(prep))  # iterations per stage at most
         #: the eyes of --eyes (the design eye first), or [] for the design eye alone (the paper)
         self.eyes = list(eyes or [])
         self.z0 = decal_height(prep.base)
@@ -487,11 +493,11 @@ class _StageLoop:
             self.log.append(entry)
             if now - last[0] >= self.log_every_s:
                 last[0] = now
-                self.progress(spec.name, it, request.max_iters, parts, now - stage_t0)
+                self.progress(spec.name, it, self.cap, parts, now - stage_t0)
 
         delta = self.problem.delta
         settings = SolverSettings(
-            max_iters=request.max_iters,
+            max_iters=self.cap,
             lr_h=delta / 20,
             # the weighted floors of the terms (the barrier's): see SolverSettings.energy_floor
             energy_floor=sum(term_weight(spec, t, values) * t.floor(self.problem) for t, _ in self.energies if t.floor),
@@ -546,7 +552,7 @@ class _StageLoop:
                 "max_abs_height_change": float((h - self.z).abs().max()),
             }
         )
-        self.progress(spec.name, res.iterations, request.max_iters,
+        self.progress(spec.name, res.iterations, self.cap,
                       {**(res.log[-1] if res.log else {}), "E_total": res.energy}, res.seconds)
         return h, c
 
@@ -616,6 +622,11 @@ def _drop_times(metrics: dict[str, Any]) -> None:
             st.pop(key, None)
 
 
+def _enhanced(prep: Prepared) -> bool:
+    """Whether the stages aim at the black-white enhancement (False: the pictures as they are, photographs)."""
+    return not (prep.enhancement and prep.enhancement["strategy"] == "none")
+
+
 def _parameters(
     request: DesignRequest,
     weights: dict[str, float],
@@ -643,6 +654,8 @@ def _parameters(
             d[k] = Path(v).name  # a file's name, not the machine's path to it
     d["weights_used"] = weights
     d["rho"] = rho
+    d["method_used"] = method_used(request.ablation, request.method)
+    d["max_iters_used"] = request.stage_cap(enhancement is None or enhancement.get("strategy") != "none")
     d["stages"] = [asdict(s) for s in stages]
     d["enhancement_used"] = dict(enhancement or {})
     if target is not None:

@@ -18,7 +18,7 @@ from saucerfab.eyes import DEFAULT_IPD_MM, DESIGN_EYES_USAGE, EyeSpec, parse_eye
 from saucerfab.heightfield import HEIGHT_SCALE
 from saucerfab.images import FITS
 from saucerfab.optimize.energies import WEIGHTS
-from saucerfab.optimize.stages import ABLATION_STAGES, MAX_ITERS, METHODS, check_weights, stages_for
+from saucerfab.optimize.stages import ABLATION_STAGES, METHODS, check_weights, stage_cap, stages_for
 from saucerfab.profiles import DEFAULT_PRINTER
 from saucerfab.scene import VIEW_NAMES
 
@@ -80,15 +80,23 @@ class DesignRequest(_Weights):
             c = 0.33 instead of the enhancement's black, which blunts the
             black-white contrast; at the default 0.01 the full method reaches
             lower E_visual and E_deform (RESULTS.md).
-        max_iters: iteration cap per stage.
+        max_iters: iteration cap for every stage; None (the default): the
+            cap of the method that runs (:data:`saucerfab.optimize.stages.STAGE_CAPS`:
+            under "auto" 120 for pictures with the black-white enhancement
+            and 90 for photographs, 120 for "fast", 400 for "paper" and the
+            ablations).
         ablation: "full" (the paper's method) or one of Figure 11's ablations
             (:data:`ABLATIONS`, the keys of :data:`saucerfab.optimize.stages.ABLATION_STAGES`).
-        method: how the full method runs (:data:`METHODS`): "paper" (the
-            default) runs Algorithm 1's three stages; "fast" skips the
-            small-sigma Laplacian stage, a draft mode (about 0.76x the time,
-            verified pictures -1.6 to +3.5 dB: benchmarks/RESULTS.md). The
-            ablations always run as the paper wrote them ("fast" with one is
-            refused). :func:`saucerfab.optimize.stages.stages_for`.
+        method: how the full method runs (:data:`METHODS`): "auto" (the
+            default) skips the small-sigma Laplacian stage for pictures with
+            the black-white enhancement (each stage to at most 120
+            iterations) and runs it for photographs (90 each); "fast" always
+            skips it (120 each);
+            "paper" runs Algorithm 1's three stages as written, to 400
+            iterations each. The ablations always run as the paper wrote
+            them ("fast" with one is refused). Measured in
+            benchmarks/RESULTS.md; the module docstring of
+            :mod:`saucerfab.optimize.stages`.
         frames: "inscribed" (the default) re-aims the scene's view frames at
             the largest square wholly on the saucer and wholly on its
             reflection, so each whole picture is seen; "contain" at the
@@ -155,7 +163,7 @@ class DesignRequest(_Weights):
     reflected_mask: Path | None = None
     reflected2_mask: Path | None = None
     height_scale: float = HEIGHT_SCALE
-    max_iters: int = MAX_ITERS
+    max_iters: int | None = None
     ablation: str = "full"
     method: str = METHODS[0]
     frames: str = FRAMES[0]
@@ -242,8 +250,11 @@ class DesignRequest(_Weights):
                 f"--eyes {self.eyes} is not supported with a second reflected image (--reflected2) yet; "
                 "give --eyes point"
             )
-        if self.max_iters < 1:
-            raise ConfigError(f"max_iters must be at least 1, got {self.max_iters}")
+        v = self.max_iters
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int)):
+            raise ConfigError(f"max_iters must be a whole number of iterations per stage, got {v!r}")
+        if v is not None and v < 1:
+            raise ConfigError(f"max_iters must be at least 1, got {v}")
         for w in WEIGHTS:
             v = getattr(self, w.key)
             if w.positive and not (v > 0):
@@ -251,7 +262,18 @@ class DesignRequest(_Weights):
             if not w.positive and v is not None and not (v >= 0):
                 raise ConfigError(f"{w.key} must be a non-negative number, got {v!r}")
         # a weight no stage of this run uses would be ignored
-        check_weights(self.ablation, {w.key: getattr(self, w.key) for w in WEIGHTS}, self.method)
+        # (with --enhancement auto, whether the pictures get the enhancement is known once they are read)
+        enhanced = {"subject": True, "none": False}.get(self.enhancement)
+        check_weights(self.ablation, {w.key: getattr(self, w.key) for w in WEIGHTS}, self.method, enhanced)
+
+    def stage_cap(self, enhanced: bool = True) -> int:
+        """Iterations per stage at most: :attr:`max_iters`, or the cap of the method that runs.
+
+        Args:
+            enhanced: the pictures have the black-white enhancement, or are used as they are (known once
+                they are read: ``prepare``).
+        """
+        return stage_cap(self.ablation, self.method, self.max_iters, enhanced)
 
     @classmethod
     def default(cls, name: str) -> object:

@@ -54,6 +54,7 @@ def option_choices() -> dict[str, Any]:
     from saucerfab.heightfield import BASE_SHAPES
     from saucerfab.images import FITS
     from saucerfab.optimize.request import ENHANCEMENTS, FRAMES, METHODS, DesignRequest
+    from saucerfab.optimize.stages import STAGE_CAPS
     from saucerfab.profiles import list_profiles
     from saucerfab.scene import paper_scene
 
@@ -70,6 +71,7 @@ def option_choices() -> dict[str, Any]:
         "frames": list(FRAMES),
         "enhancements": list(ENHANCEMENTS),
         "methods": list(METHODS),
+        "stage_caps": dict(STAGE_CAPS),
         "defaults": {
             "printer": default("printer"),
             "cup_diameter_mm": paper.cup_diameter_mm,

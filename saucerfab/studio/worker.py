@@ -144,12 +144,18 @@ def _end(ws: Workspace, run_id: str, status: str, error: str | None = None, note
     ws.update_run(run_id, change)
 
 
-def _stages(request: Any) -> list[str]:
-    """The stage names of the request's method, both with and without the black-white enhancement."""
+def _plans(request: Any) -> list[list[str]]:
+    """The stage names the request can run: with the black-white enhancement, then with the pictures as they are.
+
+    Which one runs is known once run_design has read the pictures (with
+    ``--enhancement auto``); under the default method the two differ in
+    length as well as in names (the small-sigma stage runs only without
+    the enhancement: :func:`saucerfab.optimize.stages.skips_small_sigma`).
+    """
     from saucerfab.optimize.stages import stages_for, without_enhancement
 
-    specs = stages_for(request.ablation, request.method)
-    return [s.name for s in specs] + [s.name for s in without_enhancement(specs)]
+    return [[s.name for s in stages_for(request.ablation, request.method, True)],
+            [s.name for s in without_enhancement(stages_for(request.ablation, request.method, False))]]
 
 
 class _Reporter:
@@ -159,16 +165,23 @@ class _Reporter:
         self.folder = folder
         self.scrub = scrub  # takes the workspace's path out of a message
         self.watch = watch
-        names = _stages(request)
-        self.count = len(names) // 2
-        self.index = {n: i % self.count for i, n in enumerate(names)}
+        self.plans = _plans(request)
+        # until a stage's name tells which plan runs, the one its enhancement option implies
+        self.plan = self.plans[1 if request.enhancement == "none" else 0]
         self.t0 = time.perf_counter()
         self.last = 0.0
         self.last_stage: str | None = None
-        self.doc: dict[str, Any] = {"stage": None, "stage_index": 0, "stages": self.count, "iteration": 0,
-                                    "max_iterations": request.max_iters, "energies": {}, "elapsed_s": 0.0,
+        self.doc: dict[str, Any] = {"stage": None, "stage_index": 0, "stages": len(self.plan), "iteration": 0,
+                                    "max_iterations": request.stage_cap(), "energies": {}, "elapsed_s": 0.0,
                                     "left_s": None, "looks": None, "phase": "design"}
         self.write(force=True)
+
+    def stage_index(self, stage: str) -> int:
+        """0-based index of ``stage`` in the plan that runs; a stage only one plan has settles which runs."""
+        if stage not in self.plan:
+            self.plan = next((plan for plan in self.plans if stage in plan), self.plan)
+            self.doc["stages"] = len(self.plan)
+        return self.plan.index(stage) if stage in self.plan else 0
 
     def write(self, force: bool = False) -> None:
         now = time.perf_counter()
@@ -185,9 +198,9 @@ class _Reporter:
     def progress(self, stage: str, it: int, max_it: int, energies: dict[str, float], _stage_s: float) -> None:
         if self.watch.gone():
             raise KeyboardInterrupt  # the server died: stop here, run_design saves the checkpoint
-        si = self.index.get(stage, 0)
+        si = self.stage_index(stage)
         elapsed = time.perf_counter() - self.t0
-        done = (si + min(it, max_it) / max(max_it, 1)) / max(self.count, 1)
+        done = (si + min(it, max_it) / max(max_it, 1)) / max(len(self.plan), 1)
         self.doc.update(stage=stage, stage_index=si, iteration=it, max_iterations=max_it,
                         energies={k: float(v) for k, v in energies.items()
                                   if k.startswith("E_") and isinstance(v, (int, float))},
@@ -203,8 +216,8 @@ class _Reporter:
             write_bytes_atomic(self.folder / rel, Path(src).read_bytes())
             copied[view] = rel
         self.doc["looks"] = {"stage": stage, "files": copied}
-        if stage in self.index:
-            self.doc.update(stage=stage, stage_index=min(self.index[stage] + 1, self.count))
+        if any(stage in plan for plan in self.plans):
+            self.doc.update(stage=stage, stage_index=min(self.stage_index(stage) + 1, len(self.plan)))
         self.write(force=True)
 
     def phase(self, name: str) -> None:

@@ -33,8 +33,11 @@ def test_design_folder_is_complete_and_bounded(small_design) -> None:  # noqa: A
     assert meta["schema"] == "saucerfab.design/1"
     delta = d.scene.saucer.delta
     assert np.abs(d.heights - d.base_heights).max() < delta
-    assert [s["name"] for s in meta["metrics"]["stages"]] == ["bw_sigma_large", "bw_sigma_small", "sparse"]
-    assert meta["parameters"]["method"] == "paper"
+    # the default method, auto: pictures with a subject skip the small-sigma stage; every stage capped
+    assert [s["name"] for s in meta["metrics"]["stages"]] == ["bw_sigma_large", "sparse"]
+    assert meta["parameters"]["method"] == "auto" and meta["parameters"]["method_used"] == "auto"
+    assert meta["parameters"]["max_iters_used"] == req.max_iters
+    assert all(st["iterations"] <= req.max_iters for st in meta["metrics"]["stages"])
     for st in meta["metrics"]["stages"]:
         for key in ("E_visual", "E_deform", "conflict_fraction", "max_abs_height_change", "iterations", "seconds"):
             assert key in st
@@ -98,7 +101,7 @@ def test_ctrl_c_keeps_a_checkpoint_and_resume_gives_the_same_design(small_design
     out = tmp_path / "design"
 
     def interrupt(stage, it, max_it, parts, elapsed):  # noqa: ANN001
-        if stage == "bw_sigma_small":
+        if stage == "sparse":  # the second stage of the default method: the first is in the checkpoint
             if how == "KeyboardInterrupt":
                 raise KeyboardInterrupt
             _as_numba_surfaces_it()
@@ -181,7 +184,7 @@ def test_cli_design_json_short_options_and_force(tmp_path, capsys) -> None:
 
     # ... with a small atlas: the printer's own would cost a 16x larger bake for a 128 px render
     assert json.loads((out / "verify" / "verify.json").read_text())["texture_px"] == QUICK_TEXTURE_PX
-    assert [s["name"] for s in d["stages"]] == ["bw_sigma_large", "bw_sigma_small", "sparse"]
+    assert [s["name"] for s in d["stages"]] == ["bw_sigma_large", "sparse"]  # auto, pictures with a subject
     for st in d["stages"]:
         assert {"name", "iterations", "E_visual", "E_deform", "stop_reason", "seconds"} <= set(st)
     assert d["final"]["E_visual_final"] > 0 and d["final"]["max_abs_height_change"] >= 0
@@ -197,6 +200,9 @@ def test_cli_design_json_short_options_and_force(tmp_path, capsys) -> None:
     assert main(_design_argv(out, "--force")) == 0
     captured = capsys.readouterr()
     assert "final E_visual" in captured.out and "against the original pictures" in captured.out
+    # ... and which method ran, and that it was the default's choice
+    assert ("method auto (the default): bw_sigma_large, sparse (the small-sigma stage skipped: these pictures "
+            "have a clear subject), at most 5 iterations a stage") in captured.out
     assert "it " in captured.err  # progress on stderr, not stdout
     # --seed says what it seeds
     with pytest.raises(SystemExit):
@@ -218,16 +224,23 @@ def test_cli_design_refuses_a_weight_the_ablation_does_not_use(tmp_path, capsys)
     assert weights_used("no_deform") == set()
     assert weights_used("sparse_only") == {"lam"}
     assert weights_used("laplacian") == {"w_large", "w_small"}
-    assert weights_used("full") == {"w_large", "w_small", "lam"}
+    assert weights_used("full", "paper") == {"w_large", "w_small", "lam"}
     assert weights_used("full", "fast") == {"w_large", "lam"}  # fast skips the small-sigma stage
+    # the default, auto, skips it for enhanced pictures only; before the pictures are read, either may run
+    assert weights_used("full", "auto", enhanced=True) == {"w_large", "lam"}
+    assert weights_used("full", "auto", enhanced=False) == weights_used("full") == {"w_large", "w_small", "lam"}
 
 
 def test_method_fast_skips_the_small_sigma_stage(tmp_path, capsys) -> None:
     from saucerfab.optimize.stages import ABLATION_STAGES, stages_for
 
-    assert stages_for("full") == ABLATION_STAGES["full"]  # the default: the paper's three stages
+    assert stages_for("full", "paper") == ABLATION_STAGES["full"]  # the paper's three stages
     assert stages_for("full", "fast") == [ABLATION_STAGES["full"][0], ABLATION_STAGES["full"][2]]
-    assert stages_for("laplacian") == ABLATION_STAGES["laplacian"]
+    # the default, auto: the small-sigma stage for pictures used as they are (photographs) only
+    assert stages_for("full") == stages_for("full", "auto", enhanced=True) == stages_for("full", "fast")
+    assert stages_for("full", "auto", enhanced=False) == ABLATION_STAGES["full"]
+    assert stages_for("full", "fast", enhanced=False) == stages_for("full", "fast")
+    assert stages_for("laplacian") == ABLATION_STAGES["laplacian"]  # and the ablations as written
     req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", method="fast", **TINY_REQ)
     out = run_design(req, tmp_path / "d", progress=lambda *a: None)
     meta = json.loads((out / "design.json").read_text())
@@ -244,9 +257,47 @@ def test_method_fast_skips_the_small_sigma_stage(tmp_path, capsys) -> None:
     assert "--w-small" in err and "--method fast skips" in err
     with pytest.raises(ConfigError, match="--method fast"):
         DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", method="fast", w_small=5.0)
-    with pytest.raises(ConfigError, match="method must be one of paper, fast"):
+    with pytest.raises(ConfigError, match="method must be one of auto, fast, paper"):
         DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", method="quick")
     assert not d.exists()
+
+
+def test_each_method_has_its_stage_cap_and_max_iters_overrides_it(tmp_path, capsys) -> None:
+    from saucerfab.optimize.stages import STAGE_CAPS, method_used, stage_cap
+
+    assert method_used("full") == "auto" and method_used("laplacian") == "paper"  # ablations run as written
+    # the default: 120 iterations a stage for pictures with a subject (two stages), 90 for photographs (three)
+    assert stage_cap("full") == stage_cap("full", enhanced=True) == 120 and stage_cap("full", enhanced=False) == 90
+    assert STAGE_CAPS["auto"] == (120, 90) and stage_cap("full", "fast", enhanced=False) == 120
+    assert stage_cap("full", "paper") == stage_cap("sparse_only") == STAGE_CAPS["paper"][1] == 400
+    assert stage_cap("full", "paper", 7) == stage_cap("full", max_iters=7) == 7  # given: every stage, any method
+    pics = (SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png")
+    assert DesignRequest(*pics).stage_cap() == 120 and DesignRequest(*pics, max_iters=500).stage_cap() == 500
+    assert DesignRequest(*pics, ablation="laplacian").stage_cap() == 400  # ablations run as the paper wrote them
+    for bad, why in ((0, "at least 1"), (-3, "at least 1"), (2.5, "a whole number"), (True, "a whole number"),
+                     ("9", "a whole number")):
+        with pytest.raises(ConfigError, match=f"max_iters must be {why}"):
+            DesignRequest(*pics, max_iters=bad)
+    # a weight of the stage the default skips for these pictures is refused once they are read (before any
+    # stage), and the message says it is the default's choice; photographs run that stage, so it weighs it
+    assert main(["design", "--direct", str(pics[0]), "--reflected", str(pics[1]), "--out",
+                 str(tmp_path / "d"), "--w-small", "5", *TINY]) == 2
+    err = capsys.readouterr().err
+    assert "--w-small" in err and "the default method (auto), for pictures with a clear subject" in err
+    assert "--method paper" in err and "Traceback" not in err
+    assert not (tmp_path / "d").exists() and not (tmp_path / ".d.checkpoint").exists()
+    with pytest.raises(ConfigError, match="--w-small"):  # known up front when the enhancement is asked for
+        DesignRequest(*pics, enhancement="subject", w_small=5.0)
+    photos = (SAMPLES / "photos" / "chelsea.png", SAMPLES / "photos" / "coffee.png")
+    out = run_design(DesignRequest(*photos, w_small=5.0, **TINY_REQ), tmp_path / "p", progress=lambda *a: None)
+    params = json.loads((out / "design.json").read_text())["parameters"]
+    assert [s["name"] for s in params["stages"]] == ["plain_sigma_large", "plain_sigma_small", "sparse"]
+    assert params["weights_used"]["w_small"] == 5.0 and params["max_iters_used"] == TINY_REQ["max_iters"]
+    out = run_design(DesignRequest(*photos, resolution=12, image_size=32), tmp_path / "q", progress=lambda *a: None)
+    params = json.loads((out / "design.json").read_text())["parameters"]
+    assert params["max_iters_used"] == 90  # the default's cap for photographs
+    assert all(st["iterations"] <= 90 for st in json.loads((out / "design.json").read_text())["metrics"]["stages"])
+
 
 
 def test_interrupt_in_the_first_stage_says_nothing_finished(tmp_path) -> None:
@@ -269,7 +320,7 @@ def test_resumed_design_counts_the_earlier_run_and_says_so(tmp_path, capsys, mon
     from saucerfab.optimize import pipeline
 
     def interrupt_second(stage, it, max_it, parts, elapsed):
-        if stage == "bw_sigma_small":
+        if stage == "sparse":  # the default method's second stage
             raise KeyboardInterrupt
 
     out = tmp_path / "design"
@@ -302,7 +353,7 @@ def test_photographs_without_a_subject_are_designed_without_enhancement(tmp_path
     used, stages = _used(out)
     assert used["asked"] == "auto" and used["strategy"] == "none"
     assert "'chelsea.png'" in used["why"] and str(SAMPLES) not in used["why"]  # the file's name, not a path
-    assert stages == ["plain_sigma_large", "plain_sigma_small", "sparse"]
+    assert stages == ["plain_sigma_large", "plain_sigma_small", "sparse"]  # auto runs the small stage for photos
     # the paper's enhancement, asked for, still needs a subject
     with pytest.raises(ImageError, match="no foreground"):
         run_design(DesignRequest(SAMPLES / "photos" / "chelsea.png", SAMPLES / "photos" / "coffee.png",

@@ -128,7 +128,7 @@ def test_the_multi_eye_energy_is_the_weighted_sum_of_single_eye_energies() -> No
     from saucerfab.optimize.views import Rig
 
     req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", resolution=12,
-                        image_size=32, max_iters=2, eyes="both", w_large=1.0, w_small=1.0, lam=1.0)
+                        image_size=32, max_iters=2, eyes="both", w_large=1.0, w_small=1.0, lam=1.0, method="paper")
     prep = prepare(req)
     rig = Rig(prep.scene, prep.base)
     eyes = eye_rigs(prep.scene, prep.base, req.eye_spec(), rig_class=Rig, design_rig=rig)

@@ -148,8 +148,9 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         page.fill("#image-size", "48")
         page.fill("#max-iters", "6")
         page.select_option("#printer", "j55")
-        assert page.input_value("#method") == "paper"  # the default
-        page.select_option("#method", "fast")  # the draft mode: two stages
+        assert page.input_value("#method") == "auto"  # the default
+        assert page.get_attribute("#max-iters", "placeholder") == "120/90 (auto), 120 (fast), 400 (paper)"  # the caps
+        page.select_option("#method", "paper")  # the paper's three stages
         page.locator("#method-help").scroll_into_view_if_needed()
         page.screenshot(path=str(ARTIFACTS / "02-advanced.png"))  # the advanced options, for a person to look at
         _shot(page, "02-pictures")
@@ -162,7 +163,7 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
             status = page.locator("#run-status").inner_text()
             if status in ("failed", "cancelled", "interrupted"):
                 raise AssertionError(f"the design ended {status}: {page.locator('#run-error').inner_text()}")
-            if not seen["stage"] and re.search(r"Stage \d+ of 2\b", page.locator("#progress-stage").inner_text()):
+            if not seen["stage"] and re.search(r"Stage \d+ of 3\b", page.locator("#progress-stage").inner_text()):
                 seen["stage"] = True
             looks = page.locator("#looks").is_visible() and _images_loaded(page, "#looks-gallery img") >= 3
             if not seen["look"] and looks:
@@ -228,7 +229,7 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         page.click("#run-duplicate")
         assert page.locator("#duplicate-note").is_visible()
         assert page.input_value("#resolution") == "16" and page.input_value("#shape") == "waves"
-        assert page.input_value("#method") == "fast"
+        assert page.input_value("#method") == "paper"
         page.select_option("#shape", "bowl")
         page.fill("#max-iters", "150")  # long enough to be caught running
         page.click("#start")
@@ -237,7 +238,7 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         status, body = http_get(f"{studio}/api/runs/{copy_id}")
         record = json.loads(body)
         assert record["options"]["shape"] == "bowl" and record["options"]["resolution"] == 16, record["options"]
-        assert record["options"]["method"] == "fast", record["options"]
+        assert record["options"]["method"] == "paper", record["options"]
         _wait(page, "the copy in the history", lambda: page.locator("#history li").count() == 2, 10, errors)
 
         def status_is(*wanted: str) -> bool:

@@ -58,7 +58,10 @@ def test_page_options_and_unknown_routes(idle: TestClient) -> None:
     assert r.status_code == 200
     doc = r.json()
     assert "waves" in doc["shapes"] and {"key": "j55", "name": "Stratasys J55 Prime"} in doc["printers"]
-    assert doc["defaults"]["max_iters"] == 400 and doc["defaults"]["resolution"] == 150
+    assert doc["defaults"]["max_iters"] is None and doc["defaults"]["resolution"] == 150  # None: the method's cap
+    # each method's cap: (pictures with a subject, photographs)
+    assert doc["stage_caps"] == {"auto": [120, 90], "fast": [120, 120], "paper": [400, 400]}
+    assert doc["defaults"]["method"] == "auto"
     assert set(doc["fit_rules"]) == set(doc["fits"]) == {"pad", "crop"}
     assert doc["limits"]["max_upload_bytes"] == 64 << 20
     names = {s["name"]: s for s in doc["samples"]}

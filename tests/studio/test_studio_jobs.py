@@ -143,3 +143,34 @@ def test_a_worker_stops_when_its_server_dies(tmp_path: Path) -> None:
     assert rec["status"] == "interrupted", rec
     assert (ws.runs / run_id / ".design.checkpoint" / "state.npz").is_file()
     assert "interrupted in stage" in (ws.runs / run_id / "worker.log").read_text()  # run_design saved its state
+
+
+def test_the_progress_counts_the_stages_of_the_plan_that_runs(tmp_path: Path) -> None:
+    """Under the default method a photograph runs three stages and a picture with a subject two: the
+    progress learns which from the first stage's name (the pictures are read inside run_design)."""
+    import json
+
+    from saucerfab.optimize.request import DesignRequest
+    from saucerfab.samples import SAMPLES
+    from saucerfab.studio.worker import _Reporter
+
+    class Alive:
+        def gone(self) -> bool:
+            return False
+
+    def doc(folder: Path) -> dict:
+        return json.loads((folder / "progress.json").read_text())
+
+    for pics, first, names in (
+        ((HEART, STAR), "bw_sigma_large", ["bw_sigma_large", "sparse"]),
+        ((SAMPLES / "photos" / "chelsea.png", SAMPLES / "photos" / "coffee.png"), "plain_sigma_large",
+         ["plain_sigma_large", "plain_sigma_small", "sparse"]),
+    ):
+        folder = tmp_path / first
+        folder.mkdir()
+        rep = _Reporter(folder, DesignRequest(*pics), Alive())
+        for i, name in enumerate(names):
+            rep.progress(name, 1, 120, {"E_visual": 1.0}, 0.1)
+            d = doc(folder)
+            assert (d["stage"], d["stage_index"], d["stages"]) == (name, i, len(names)), d
+        assert d["max_iterations"] == 120  # the default method's cap

@@ -38,8 +38,11 @@ export class DesignForm {
     setChoices($("#printer"), (o.printers ?? []).map((p) => [p.key, p.name ? `${p.name} (${p.key})` : p.key]));
     setChoices($("#frames"), (o.frames ?? ["inscribed"]).map((f) => [f, f]));
     setChoices($("#enhancement"), (o.enhancements ?? ["auto"]).map((e) => [e, e]));
-    const methodNames = { paper: "The paper's three stages", fast: "Draft (fast)" };
-    setChoices($("#method"), (o.methods ?? ["paper"]).map((m) => [m, methodNames[m] ?? m]));
+    const caps = o.stage_caps ?? {};
+    const methodNames = { auto: "Automatic (the small-blur stage for photos only)", fast: "Fast: always two stages", paper: "The paper's three stages, as written" };
+    setChoices($("#method"), (o.methods ?? ["auto"]).map((m) => [m, methodNames[m] ?? m]));
+    // each method's cap: [pictures with a subject, photographs]
+    $("#max-iters").placeholder = Object.entries(caps).map(([m, [a, b]]) => `${a === b ? a : `${a}/${b}`} (${m})`).join(", ");
     const samples = o.samples ?? [];
     $("#load-samples").hidden = !(samples.some((s) => s.role === "direct") && samples.some((s) => s.role === "reflected"));
   }
@@ -65,7 +68,7 @@ export class DesignForm {
     $("#seed").value = 0;
     $("#frames").value = d.frames ?? "inscribed";
     $("#enhancement").value = d.enhancement ?? "auto";
-    $("#method").value = d.method ?? "paper";
+    $("#method").value = d.method ?? "auto";
     $("#verify-after").checked = d.verify ?? true;
     $("#title").value = "";
     this.syncDependent();
