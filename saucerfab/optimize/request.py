@@ -91,10 +91,9 @@ class DesignRequest(_Weights):
             default) skips the small-sigma Laplacian stage for pictures with
             the black-white enhancement (each stage to at most 120
             iterations) and runs it for photographs (90 each); "fast" always
-            skips it (120 each);
-            "paper" runs Algorithm 1's three stages as written, to 400
-            iterations each. The ablations always run as the paper wrote
-            them ("fast" with one is refused). Measured in
+            skips it (120 each); "paper" runs Algorithm 1's three stages as
+            written, to 400 iterations each. The ablations always run as the
+            paper wrote them ("fast" with one is refused). Measured in
             benchmarks/RESULTS.md; the module docstring of
             :mod:`saucerfab.optimize.stages`.
         frames: "inscribed" (the default) re-aims the scene's view frames at
