@@ -96,6 +96,11 @@ def verified(design_dir: Path, print_dir: Path) -> dict[str, float]:
     return {f"{v.view}/{v.eye}": v.psnr_db for v in res.files[0].views}
 
 
+def _spread(d: list[float]) -> tuple[float, float, float, float, int]:
+    """Changes in dB -> (mean, RMS, largest drop, largest gain, how many drop more than 0.5 dB)."""
+    return (sum(d) / len(d), (sum(x * x for x in d) / len(d)) ** 0.5, min(d), max(d), sum(x < -0.5 for x in d))
+
+
 def print_noise(rows: list[dict], k: int, arms: list[str]) -> None:
     """The path-noise table: per pair, view and eye, this checkout's default (``new``,
     else ``old``) and its K perturbed designs; then each ``--arm``'s change set
@@ -118,17 +123,15 @@ def print_noise(rows: list[dict], k: int, arms: list[str]) -> None:
     print("| eye | perturbed - default: mean dB | RMS dB | largest drop dB | largest gain dB | drops over 0.5 dB |")
     print("|---|---:|---:|---:|---:|---:|")
     for e in EYES:
-        d = deltas[e]
-        rms = (sum(x * x for x in d) / len(d)) ** 0.5
-        print(f"| {e} | {sum(d) / len(d):+.2f} | {rms:.2f} | {min(d):+.1f} | {max(d):+.1f} | "
-              f"{sum(x < -0.5 for x in d)} of {len(d)} |")
+        mean, rms, drop, gain, drops = _spread(deltas[e])
+        print(f"| {e} | {mean:+.2f} | {rms:.2f} | {drop:+.1f} | {gain:+.1f} | {drops} of {len(deltas[e])} |")
     for arm in arms:
         print(f"\n{arm} against {base}, per eye (mean / RMS / largest drop / drops over 0.5 dB):")
         for e in EYES:
             d = [r[arm]["psnr"][f"{v}/{e}"] - r[base]["psnr"][f"{v}/{e}"] for r in rows
                  for v in ("direct", "reflected")]
-            rms = (sum(x * x for x in d) / len(d)) ** 0.5
-            print(f"  {e}: {sum(d) / len(d):+.2f} / {rms:.2f} / {min(d):+.1f} / {sum(x < -0.5 for x in d)} of {len(d)}")
+            mean, rms, drop, _, drops = _spread(d)
+            print(f"  {e}: {mean:+.2f} / {rms:.2f} / {drop:+.1f} / {drops} of {len(d)}")
 
 
 def print_start_means(rows: list[dict], k: int, arms: list[str]) -> None:
@@ -164,8 +167,8 @@ def print_start_means(rows: list[dict], k: int, arms: list[str]) -> None:
         print(f"\nper eye (mean / largest drop / drops over 0.5 dB); seconds per start, all pairs: "
               f"{base} {secs[base]:.1f}, {arm} {secs[arm]:.1f}")
         for e in EYES:
-            d = deltas[e]
-            print(f"  {e}: {sum(d) / len(d):+.2f} / {min(d):+.1f} / {sum(x < -0.5 for x in d)} of {len(d)}")
+            mean, _, drop, _, drops = _spread(deltas[e])
+            print(f"  {e}: {mean:+.2f} / {drop:+.1f} / {drops} of {len(deltas[e])}")
 
 
 def _load() -> str:

@@ -211,7 +211,7 @@ def run_design(
     t_start = time.perf_counter()
     check_output_folder(out)
     prep = prepare(request)
-    enhanced = _enhanced(prep)
+    enhanced = _enhanced(prep.enhancement)
     # a weight of a stage these pictures skip would be ignored: refused now, before any stage
     check_weights(request.ablation, {w.key: getattr(request, w.key) for w in WEIGHTS}, request.method, enhanced)
     stages = stages_for(request.ablation, request.method, enhanced)
@@ -332,7 +332,7 @@ class _StageLoop:
         from saucerfab.optimize.targets import compatibility
 
         self.request, self.prep, self.rig, self.stages = request, prep, rig, stages
-        self.cap = request.stage_cap(_enhanced(prep))  # iterations per stage at most
+        self.cap = request.stage_cap(_enhanced(prep.enhancement))  # iterations per stage at most
         #: the eyes of --eyes (the design eye first), or [] for the design eye alone (the paper)
         self.eyes = list(eyes or [])
         self.z0 = decal_height(prep.base)
@@ -622,9 +622,13 @@ def _drop_times(metrics: dict[str, Any]) -> None:
             st.pop(key, None)
 
 
-def _enhanced(prep: Prepared) -> bool:
-    """Whether the stages aim at the black-white enhancement (False: the pictures as they are, photographs)."""
-    return not (prep.enhancement and prep.enhancement["strategy"] == "none")
+def _enhanced(enhancement: dict[str, str] | None) -> bool:
+    """Whether the stages aim at the black-white enhancement (False: the pictures as they are, photographs).
+
+    Args:
+        enhancement: the conflict reduction prepare chose (``Prepared.enhancement``), None for none chosen.
+    """
+    return not (enhancement and enhancement["strategy"] == "none")
 
 
 def _parameters(
@@ -655,7 +659,7 @@ def _parameters(
     d["weights_used"] = weights
     d["rho"] = rho
     d["method_used"] = method_used(request.ablation, request.method)
-    d["max_iters_used"] = request.stage_cap(enhancement is None or enhancement.get("strategy") != "none")
+    d["max_iters_used"] = request.stage_cap(_enhanced(enhancement))
     d["stages"] = [asdict(s) for s in stages]
     d["enhancement_used"] = dict(enhancement or {})
     if target is not None:
