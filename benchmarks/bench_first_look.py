@@ -80,7 +80,7 @@ def child(extra: list[str]) -> None:
 
     args = build_parser().parse_args(["design", *PAIR, "-o", "unused", *extra])
     lap("CLI imports + parser")
-    import saucerfab.render  # noqa: F401 - as the CLI: before torch (OMP_WAIT_POLICY)
+    import saucerfab.render  # noqa: F401 - as the CLI: before torch (saucerfab/__init__.py's OpenMP settings)
     from saucerfab.cli.design import given_options
     from saucerfab.fileio import write_bytes_atomic
     from saucerfab.imageio import png_bytes

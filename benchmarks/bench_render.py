@@ -21,13 +21,10 @@ Usage::
 
 from __future__ import annotations
 
-import os
-
-# torch's OpenMP workers must not spin (busy-wait) between torch ops while
-# numba's workers run; libgomp reads this when torch is imported.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+import saucerfab  # noqa: F401 - first, as in the CLI: its OpenMP wait settings must precede torch
 
 import argparse  # noqa: E402
+import os  # noqa: E402
 import platform  # noqa: E402
 import resource  # noqa: E402
 import statistics  # noqa: E402

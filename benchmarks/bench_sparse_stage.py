@@ -20,18 +20,17 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import os
 import sys
 import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import saucerfab  # noqa: E402, F401 - before torch: its OpenMP wait settings (saucerfab/__init__.py)
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from saucerfab.design import Design  # noqa: E402
 from saucerfab.heightfield import laplacian  # noqa: E402

@@ -10,11 +10,19 @@ import os as _os
 
 __version__ = "0.1.0"
 
-# torch's OpenMP workers spin-wait after each parallel region by default and
-# would fight the numba kernels' threads for the two cores; passive waiting
-# must be chosen before torch (and its OpenMP runtime) is loaded, and every
-# entry point imports this package first. A user's own setting wins.
-_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+# torch's OpenMP (libgomp) workers spin-wait after each parallel region, by
+# default for about 300,000 spins (milliseconds), and would fight the numba
+# kernels' threads for the cores. Waiting passively (no spin) costs a wake-up
+# per torch op instead; a short spin of GOMP_SPINCOUNT rounds (a fraction of a
+# millisecond) bridges the gaps between one step's torch ops and then frees
+# the cores: default designs took 7-14 % less time than with passive waiting
+# alone (three pairs, 3 + 3 interleaved runs each, issue 18, session 16:
+# benchmarks/RESULTS.md). Both must be chosen before torch (and its OpenMP
+# runtime) is loaded, and every entry point imports this package first. A
+# user's own setting of either wins.
+if "OMP_WAIT_POLICY" not in _os.environ:
+    _os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
+    _os.environ.setdefault("GOMP_SPINCOUNT", "20000")
 
 from saucerfab.errors import SaucerfabError  # noqa: E402
 

@@ -1,38 +1,37 @@
-"""Previews for people: PNG encoding, height-change maps, panels, energy plots, HTML.
+"""Previews for people: PNG encoding, panels, overlays, HTML (and the charts of :mod:`saucerfab.charts`).
 
 Everything here makes pictures of results; nothing feeds back into the
 design. Images go in as arrays in the usual orientation (row 0 at the top,
 as :mod:`saucerfab.render.camera` defines) and come out as (H, W, 3) uint8
 arrays or PNG bytes; writing files is the caller's job (atomically, with
-:mod:`saucerfab.fileio`).
-
-Matplotlib is imported lazily, inside the functions that plot, and used
-through its object API (``Figure`` + the Agg canvas): no pyplot, no global
-backend switch, no display needed, safe in worker processes.
+:mod:`saucerfab.fileio`). Everything is drawn with Pillow: no plotting
+library, no display, safe in worker processes.
 """
 
 from __future__ import annotations
 
 import base64
 import html
-import io
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
+from saucerfab.charts import energy_plot, font, height_change_map
 from saucerfab.imageio import png_bytes
 
-#: energy series drawn by :func:`energy_plot`, with their colours
-ENERGY_KEYS = (
-    ("E_total", "black"),
-    ("E_visual", "tab:blue"),
-    ("E_deform", "tab:orange"),
-    ("E_sparse", "tab:green"),
-)
-
+__all__ = [
+    "Section",
+    "as_uint8_rgb",
+    "composite",
+    "energy_plot",
+    "height_change_map",
+    "html_report",
+    "mask_overlay",
+    "side_by_side",
+    "to_png_bytes",
+]
 
 # --------------------------------------------------------------------------- arrays and PNG
 
@@ -79,110 +78,7 @@ def to_png_bytes(image: np.ndarray) -> bytes:
     return png_bytes(as_uint8_rgb(image))
 
 
-def _render_figure(fig) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """(H, W, 3) uint8 pixels of a matplotlib Figure drawn by the Agg canvas."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    canvas = FigureCanvasAgg(fig)
-    canvas.draw()
-    return np.asarray(canvas.buffer_rgba())[..., :3].copy()
-
-
-def _figure_png(fig) -> bytes:  # type: ignore[no-untyped-def]
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    FigureCanvasAgg(fig)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    return buf.getvalue()
-
-
-# --------------------------------------------------------------------------- height changes
-
-
-def height_change_map(
-    base: np.ndarray,
-    heights: np.ndarray,
-    delta: float,
-    *,
-    units: Literal["delta", "model"] = "delta",
-    extent: tuple[float, float, float, float] | None = None,
-    title: str | None = "|h - z|",
-    size_px: tuple[int, int] = (480, 400),
-    cmap: str = "viridis",
-) -> np.ndarray:
-    """Colour-coded absolute height change ``|h - z|`` (paper, Figure 8 bottom row).
-
-    The saucer is drawn as the viewer sees it from the camera (which looks
-    along +y): x to the right and the far edge (large y, the last grid row)
-    at the top. The colour scale runs from 0 to the bound ``delta`` with a
-    colourbar, in units of delta (0..1) or of the model.
-
-    Args:
-        base: (N, N) base heights z, model units; ``base[i, j]`` at
-            ``y = ys[i]``, ``x = xs[j]`` (see :mod:`saucerfab.heightfield`).
-        heights: (N, N) final heights h, model units.
-        delta: the height bound, model units (> 0).
-        units: colourbar in multiples of ``delta`` or in model units.
-        extent: (x0, x1, y0, y1) of the footprint, model units, for the axes
-            ticks; None: no ticks.
-        title: figure title, or None.
-        size_px: (width, height) of the picture, pixels.
-        cmap: a perceptually uniform matplotlib colormap.
-    Returns:
-        (size_px[1], size_px[0], 3) uint8.
-    """
-    from matplotlib.figure import Figure
-
-    z = np.asarray(base, np.float64)
-    h = np.asarray(heights, np.float64)
-    if z.shape != h.shape or z.ndim != 2:
-        raise ValueError(f"base {z.shape} and heights {h.shape} must be the same (N, N) shape")
-    if not (delta > 0 and math.isfinite(delta)):
-        raise ValueError(f"delta must be a positive number, got {delta!r}")
-    change = np.abs(h - z)
-    scale = delta if units == "delta" else 1.0
-    label = "|h - z| / delta" if units == "delta" else "|h - z| (model units)"
-    dpi = 100
-    fig = Figure(figsize=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi)
-    ax = fig.add_subplot(1, 1, 1)
-    # origin="lower": grid row 0 (smallest y, nearest the viewer) at the
-    # bottom, the far edge at the top, as seen from the camera.
-    im = ax.imshow(
-        change / scale,
-        origin="lower",
-        cmap=cmap,
-        vmin=0.0,
-        vmax=delta / scale,
-        interpolation="nearest",
-        extent=extent,
-        aspect="equal",  # model units are the same along x and y
-    )
-    if extent is None:
-        ax.set_xticks([])
-        ax.set_yticks([])
-    else:
-        ax.set_xlabel("x")
-        ax.set_ylabel("y")
-    if title:
-        ax.set_title(title)
-    cb = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04)
-    cb.set_label(label)
-    fig.tight_layout()
-    return _render_figure(fig)
-
-
 # --------------------------------------------------------------------------- panels
-
-
-def _font(size: int):  # type: ignore[no-untyped-def]
-    """Pillow's built-in font at ``size`` px (needs FreeType), else its bitmap font."""
-    from PIL import ImageFont
-
-    try:
-        return ImageFont.load_default(size=size)
-    except (OSError, ImportError, TypeError, ValueError):
-        return ImageFont.load_default()
 
 
 def side_by_side(
@@ -207,7 +103,7 @@ def side_by_side(
 
     if not panels:
         raise ValueError("side_by_side needs at least one panel")
-    font = _font(title_px)
+    face = font(title_px)
     band = title_px + 8
     tiles = []
     for _, img in panels:
@@ -229,11 +125,11 @@ def side_by_side(
     for (title, _), tile in zip(panels, tiles):
         text = str(title)
         # shorten titles wider than their panel rather than overlap the next one
-        if draw.textlength(text, font=font) > tile.width:
-            while len(text) > 1 and draw.textlength(text + "\u2026", font=font) > tile.width:
+        if draw.textlength(text, font=face) > tile.width:
+            while len(text) > 1 and draw.textlength(text + "\u2026", font=face) > tile.width:
                 text = text[:-1]
             text += "\u2026"
-        draw.text((x, gap), text, fill=(0, 0, 0), font=font)
+        draw.text((x, gap), text, fill=(0, 0, 0), font=face)
         sheet.paste(tile, (x, gap + band))
         x += tile.width + gap
     return np.asarray(sheet).copy()
@@ -295,145 +191,6 @@ def composite(direct_view: np.ndarray, reflected_view: np.ndarray, reflected_alp
         raise ValueError(f"layer shapes differ: {lower.shape}, {upper.shape}, alpha {a.shape}")
     out = lower * (1.0 - a[..., None]) + upper * a[..., None]
     return np.round(out).astype(np.uint8)
-
-
-# --------------------------------------------------------------------------- energies
-
-
-def _series(log: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
-    vals = []
-    for row in log:
-        v = row.get(key)
-        try:
-            vals.append(float(v) if v is not None else math.nan)
-        except (TypeError, ValueError):
-            vals.append(math.nan)
-    return np.asarray(vals, np.float64)
-
-
-def _elapsed(log: Sequence[Mapping[str, Any]]) -> np.ndarray:
-    """Elapsed seconds per row; a clock that restarts at a stage boundary is chained on."""
-    t = _series(log, "time_s")
-    if np.isnan(t).all():
-        return _series(log, "iteration")
-    t = np.where(np.isnan(t), 0.0, t)
-    out = np.empty_like(t)
-    offset = 0.0
-    prev = -math.inf
-    for k, v in enumerate(t):
-        if v + offset < prev:  # the stage's own clock started again
-            offset = prev
-        out[k] = v + offset
-        prev = out[k]
-    return out
-
-
-def energy_plot(
-    log: Sequence[Mapping[str, Any]],
-    *,
-    title: str | None = "Energies over time",
-    size_px: tuple[int, int] = (720, 420),
-) -> bytes:
-    """A plot of the optimizer's energies against time, per stage (paper, Figure 10).
-
-    Args:
-        log: one mapping per iteration with ``stage`` (str), ``iteration``,
-            ``time_s`` (seconds since the run started; a per-stage clock that
-            restarts at each stage is chained on), and any of ``E_visual``,
-            ``E_deform``, ``E_sparse``, ``E_total`` (missing or None: not
-            drawn for that row).
-        title: plot title or None.
-        size_px: (width, height) in pixels.
-    Returns:
-        PNG bytes. The y axis is logarithmic when every drawn value is
-        positive, symmetric-log otherwise (the barrier terms can make the
-        total negative); stage boundaries are dashed lines with the stage name.
-    """
-    from matplotlib.figure import Figure
-
-    if not log:
-        raise ValueError("energy_plot needs a non-empty log")
-    x = _elapsed(log)
-    stages = [str(row.get("stage", "")) for row in log]
-    dpi = 100
-    fig = Figure(figsize=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi)
-    ax = fig.add_subplot(1, 1, 1)
-    # stage boundaries: where the stage name changes
-    starts = [0] + [k for k in range(1, len(stages)) if stages[k] != stages[k - 1]]
-    spans = list(zip(starts, starts[1:] + [len(stages)]))
-    series = {key: _series(log, key) for key, _ in ENERGY_KEYS}
-    finite = [y[~np.isnan(y)] for y in series.values()]
-    values = np.concatenate(finite) if finite else np.zeros(0)
-    negative = bool((values < 0).any())
-    drawn = False
-    for key, colour in ENERGY_KEYS:
-        y = series[key]
-        if np.isnan(y).all():
-            continue
-        if not negative:
-            # on a log axis an exact 0 (E_sparse at its stage's start,
-            # E_deform before anything moved) is left out, not clamped
-            y = np.where(y > 0, y, np.nan)
-        # one line per stage: a jump between stages (new sigma, new terms)
-        # is a change of problem, not a step of the solver
-        for n, (a, b) in enumerate(spans):
-            ax.plot(
-                x[a:b],
-                y[a:b],
-                color=colour,
-                lw=1.4 if key == "E_total" else 1.1,
-                marker="." if b - a == 1 else None,  # a one-row stage still shows
-                label=key if n == 0 else None,
-            )
-        drawn = True
-    if negative:
-        nonzero = np.abs(values[values != 0])
-        ax.set_yscale("symlog", linthresh=float(nonzero.min()) if nonzero.size else 1.0)
-    elif drawn and np.nanmax(values, initial=0.0) > 0:
-        ax.set_yscale("log")
-    labels = []
-    for n, k in enumerate(starts):
-        if n > 0:
-            ax.axvline(x[k], color="0.4", ls="--", lw=0.9)
-        labels.append(ax.annotate(
-            stages[k],
-            xy=(x[k], 1.0),
-            xycoords=("data", "axes fraction"),
-            xytext=(3, -12),
-            textcoords="offset points",
-            fontsize=8,
-            color="0.25",
-        ))
-    has_time = not np.isnan(_series(log, "time_s")).all()
-    ax.set_xlabel("time (s)" if has_time else "iteration")
-    ax.set_ylabel("energy")
-    if title:
-        ax.set_title(title)
-    if drawn:
-        ax.legend(loc="best", fontsize=8)
-    ax.grid(True, which="major", alpha=0.3)
-    fig.tight_layout()
-    _stagger_labels(fig, labels)
-    return _figure_png(fig)
-
-
-def _stagger_labels(fig, labels: Sequence[Any]) -> None:  # type: ignore[no-untyped-def]
-    """Move each stage label down a row until its box meets no earlier label's.
-
-    Short stages start close together, so their names would print over
-    each other on one row; measured after the layout, in pixels.
-    """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    renderer = FigureCanvasAgg(fig).get_renderer()
-    placed: list[Any] = []
-    for ann in labels:
-        for row in range(len(labels)):
-            ann.xyann = (3, -12 - 11 * row)
-            box = ann.get_window_extent(renderer).padded(1.0)
-            if not any(box.overlaps(b) for b in placed):
-                break
-        placed.append(box)
 
 
 # --------------------------------------------------------------------------- HTML

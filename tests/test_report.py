@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from saucerfab.charts import draw_energy_plot, elapsed
+from saucerfab.colormaps import TABLES
 from saucerfab.report import (
     Section,
-    _elapsed,
     as_uint8_rgb,
     composite,
     energy_plot,
@@ -64,16 +65,13 @@ def _near(img: np.ndarray, colour, tol: int = 12) -> np.ndarray:
 
 
 def test_height_change_map_shape_colours_and_orientation():
-    from matplotlib import colormaps
-
     n = 40
     z = np.zeros((n, n))
     h = z.copy()
     h[-8:] = 0.02  # the far edge (largest y, last rows) moved by delta
     img = height_change_map(z, h, delta=0.02, size_px=(480, 400))
     assert img.shape == (400, 480, 3) and img.dtype == np.uint8
-    top = np.round(np.asarray(colormaps["viridis"](1.0)[:3]) * 255)
-    bottom = np.round(np.asarray(colormaps["viridis"](0.0)[:3]) * 255)
+    top, bottom = TABLES["viridis"][-1], TABLES["viridis"][0]
     hi = _near(img, top)
     lo = _near(img, bottom)
     # in the map area: the changed rows are above (smaller image rows than) the unchanged
@@ -182,36 +180,33 @@ def test_energy_plot_negative_energies_and_missing_time():
         energy_plot([])
 
 
-def test_energy_plot_stage_labels_do_not_overlap(monkeypatch):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    from saucerfab import report
-
+def test_energy_plot_stage_labels_do_not_overlap():
     # three short stages: they start a few pixels apart on a long run's time axis
     rows = [{"stage": s, "iteration": i, "time_s": t0 + 0.01 * i, "E_visual": 100.0 - i, "E_total": 120.0 - i}
             for s, t0 in (("bw_sigma_large", 0.0), ("bw_sigma_small", 0.03), ("sparse", 0.06)) for i in range(3)]
     rows.append({"stage": "sparse", "iteration": 3, "time_s": 5.0, "E_visual": 90.0, "E_total": 110.0})
-    figs = []
-    real = report._figure_png
-    monkeypatch.setattr(report, "_figure_png", lambda fig: figs.append(fig) or real(fig))
-    assert decode_png(energy_plot(rows)).ndim == 3
-    (fig,) = figs
-    renderer = FigureCanvasAgg(fig).get_renderer()
-    labels = [t for ax in fig.axes for t in ax.texts]
-    assert [t.get_text() for t in labels] == ["bw_sigma_large", "bw_sigma_small", "sparse"]
-    boxes = [t.get_window_extent(renderer) for t in labels]
+    img, layout = draw_energy_plot(rows, size_px=(720, 420))
+    assert img.shape == (420, 720, 3)
+    boxes = layout.stage_labels
+    assert len(boxes) == 3
     for i in range(len(boxes)):
         for j in range(i + 1, len(boxes)):
-            assert not boxes[i].overlaps(boxes[j]), (labels[i].get_text(), labels[j].get_text())
-    # and they stay inside the plot
-    ax_box = fig.axes[0].get_window_extent(renderer)
-    assert all(ax_box.y0 <= b.y0 and b.y1 <= ax_box.y1 for b in boxes)
+            a, b = boxes[i], boxes[j]
+            assert a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1], (i, j)
+    # they stay inside the plot, and the legend covers none of them
+    px0, py0, px1, py1 = layout.plot
+    assert all(px0 <= b[0] and b[2] <= px1 and py0 <= b[1] and b[3] <= py1 for b in boxes)
+    lg = layout.legend
+    assert lg is not None and all(lg[2] <= b[0] or b[2] <= lg[0] or lg[3] <= b[1] or b[3] <= lg[1] for b in boxes)
+    # the names were drawn: dark ink in each box
+    for x0, y0, x1, y1 in boxes:
+        assert (img[int(y0):int(y1) + 1, int(x0):int(x1) + 1] < 128).any()
 
 
 def test_elapsed_chains_per_stage_clocks():
-    x = _elapsed(_log(per_stage_clock=True))
+    x = elapsed(_log(per_stage_clock=True))
     assert (np.diff(x) >= 0).all()
-    np.testing.assert_allclose(x[-1], _elapsed(_log(per_stage_clock=False))[-1] - 3 * 0.05, atol=1e-9)
+    np.testing.assert_allclose(x[-1], elapsed(_log(per_stage_clock=False))[-1] - 3 * 0.05, atol=1e-9)
 
 
 # --------------------------------------------------------------------------- HTML

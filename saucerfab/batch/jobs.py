@@ -306,9 +306,9 @@ def _emit(payload: Payload, stage: str) -> None:
         pass
 
 
-#: one design at a time per process: its previews use matplotlib, which is not
-#: thread-safe, and torch's thread count is process-wide (a threaded Dask worker
-#: runs several jobs in one process; exports and checks still run side by side)
+#: one design at a time per process: torch's thread count is process-wide (a
+#: threaded Dask worker runs several jobs in one process; exports and checks
+#: still run side by side)
 _DESIGN_LOCK = threading.Lock()
 
 

@@ -15,21 +15,17 @@ Only the camera is imported with the package; the rasterizers (and numba,
 torch) load on first use, so ``from saucerfab.render.camera import Camera``
 stays cheap.
 
-Importing this package sets ``OMP_WAIT_POLICY=PASSIVE`` unless the environment
-already sets it: torch's OpenMP workers otherwise busy-wait after each torch
-operation and take a core from the numba kernels that follow (libgomp reads the
-variable when torch is first imported, so it helps when saucerfab.render is
-imported before torch, as the CLI does).
+Importing saucerfab (this package's parent) sets how torch's OpenMP workers
+wait between torch ops (``saucerfab/__init__.py``), so that they do not take a
+core from the numba kernels that follow; it counts when saucerfab is imported
+before torch, as the CLI does.
 """
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
-from saucerfab.render.camera import Camera  # noqa: E402
+from saucerfab.render.camera import Camera
 
 __all__ = ["Camera", "rasterize_hard", "render_face_colors_hard", "render_textured", "soft_rasterize"]
 

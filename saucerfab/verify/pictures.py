@@ -16,10 +16,10 @@ NOT_COMPARED = (0.35, 0.35, 0.35)
 
 def difference_map(render: np.ndarray, ref: np.ndarray, region: np.ndarray) -> np.ndarray:
     """(S, S, 3) float: |render - ref| averaged over RGB, 0..HEAT_MAX on ``magma``; grey outside ``region``."""
-    from matplotlib import colormaps
+    from saucerfab.colormaps import colormap
 
     d = np.abs(np.asarray(render, np.float32) - np.asarray(ref, np.float32)).mean(axis=2)
-    heat = colormaps["magma"](np.clip(d / HEAT_MAX, 0.0, 1.0))[..., :3].astype(np.float32)
+    heat = colormap("magma", d / HEAT_MAX).astype(np.float32) / 255.0
     heat[~np.asarray(region, bool)] = NOT_COMPARED
     return heat
 
