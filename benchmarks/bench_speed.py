@@ -41,6 +41,11 @@ import tempfile
 import time
 from pathlib import Path
 
+#: the environment as the user gave it, before importing saucerfab sets its OpenMP
+#: defaults (saucerfab/__init__.py): each design runs under it, so that the old
+#: code and this checkout each choose their own, as for a user typing the command
+USER_ENV = dict(os.environ)
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -64,7 +69,7 @@ def old_copy(rev: str, dest: Path) -> Path:
 
 
 def _env(code: Path) -> dict[str, str]:
-    return {**os.environ, "PYTHONPATH": str(code)}
+    return {**USER_ENV, "PYTHONPATH": str(code)}
 
 
 def design(code: Path, pair: str, out: Path, extra: list[str], noise_seed: int | None = None) -> dict:
