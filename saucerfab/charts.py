@@ -438,7 +438,7 @@ def draw_energy_plot(
         # change of problem, not a step of the solver; NaN (missing, or 0 on a log
         # axis) breaks a line
         for a, b in spans:
-            ok = np.isfinite(py[a:b])
+            ok = np.isfinite(py[a:b]) & np.isfinite(px[a:b])
             run: list[tuple[float, float]] = []
             for xi, yi, good in zip(px[a:b], py[a:b], ok):
                 if good:
@@ -450,7 +450,9 @@ def draw_energy_plot(
             points.extend((float(xi), float(yi)) for xi, yi, good in zip(px[a:b], py[a:b], ok) if good)
     for n, k in enumerate(starts):
         bx = float(px[k])
-        if n > 0:
+        if not math.isfinite(bx):  # a row with neither time nor iteration: name the stage at the left
+            bx = x0
+        elif n > 0:
             cv.dashed_vline(bx, y0, y1, STAGE_LINE, 0.9)
         # short stages start close together: move a name down a row until it meets no earlier one
         ascent, descent = cv.font(SMALL_PX).getmetrics()

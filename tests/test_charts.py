@@ -73,6 +73,9 @@ def test_energy_plot_negative_values_use_symlog_and_errors():
         draw_energy_plot([])
     with pytest.raises(ValueError, match="160 x 120"):
         draw_energy_plot(rows, size_px=(100, 100))
+    # rows with neither time nor iteration: nothing to place them at, no failure
+    img, layout = draw_energy_plot([{"stage": "a", "E_total": 1.0}, {"stage": "b", "E_total": 2.0}])
+    assert len(layout.stage_labels) == 2
     # a log with no energies at all still gives a page with axes
     img, layout = draw_energy_plot([{"stage": "s", "iteration": 0}])
     assert layout.legend is None and (img < 100).any()
