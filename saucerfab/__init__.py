@@ -16,8 +16,8 @@ __version__ = "0.1.0"
 # per torch op instead; a short spin of GOMP_SPINCOUNT rounds (a fraction of a
 # millisecond) bridges the gaps between one step's torch ops and then frees
 # the cores: default designs took 7-14 % less time than with passive waiting
-# alone (three pairs, 3 + 3 interleaved runs each, issue 18, session 16:
-# benchmarks/RESULTS.md). Both must be chosen before torch (and its OpenMP
+# alone (three pairs, two to six interleaved runs of each, issue 18, session
+# 16: benchmarks/RESULTS.md). Both must be chosen before torch (and its OpenMP
 # runtime) is loaded, and every entry point imports this package first. A
 # user's own setting of either wins.
 if "OMP_WAIT_POLICY" not in _os.environ:

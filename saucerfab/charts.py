@@ -492,16 +492,14 @@ def _legend(cv: _Canvas, entries: Sequence[tuple[str, tuple[int, int, int]]], pl
     # matplotlib's order of preference for "best"
     order = ("ur", "ul", "dl", "dr", "mr", "ml", "dc", "uc", "mc")
     pts = np.asarray(points, np.float64).reshape(-1, 2)
-    best, best_cost = None, math.inf
-    for where in order:
-        bx, by = xs[where[1]], ys[where[0]]
-        box = (bx, by, bx + bw, by + bh)
-        inside = int(((pts[:, 0] >= box[0]) & (pts[:, 0] <= box[2]) & (pts[:, 1] >= box[1])
-                      & (pts[:, 1] <= box[3])).sum())
-        cost = inside + 10_000 * sum(_overlaps(box, b) for b in avoid)
-        if cost < best_cost:
-            best, best_cost = box, cost
-    assert best is not None  # order is not empty
+
+    def cost(box: Box) -> int:
+        inside = ((pts[:, 0] >= box[0]) & (pts[:, 0] <= box[2]) & (pts[:, 1] >= box[1]) & (pts[:, 1] <= box[3]))
+        return int(inside.sum()) + 10_000 * sum(_overlaps(box, b) for b in avoid)
+
+    # min keeps the first of equal costs: the earliest place in the order wins ties
+    boxes = [(xs[w[1]], ys[w[0]], xs[w[1]] + bw, ys[w[0]] + bh) for w in order]
+    best = min(boxes, key=cost)
     cv.rectangle(best, outline=(204, 204, 204), fill=PAGE, width=0.8)
     for n, (key, colour) in enumerate(entries):
         yy = best[1] + 5.0 + row_h * n + row_h / 2 - 1.0
