@@ -89,6 +89,54 @@ def _lines(h: np.ndarray, dx: float, dy: float) -> tuple[tuple[np.ndarray, np.nd
     )
 
 
+def feature_crests_reference(
+    h: np.ndarray, dx: float, dy: float, crest_p: float, feature_w: float, keep: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The feature rule's findings on every interior vertex, in whole-grid numpy passes.
+
+    A vertex is a thin crest on a mesh line when it stands at least ``crest_p``
+    above both neighbours on the line and its width at half that prominence is
+    under ``feature_w``. The reference of
+    :func:`saucerfab.relief_kernels.feature_crests` (the same float64
+    operations in the same order, bit for bit).
+
+    Args:
+        h: (N, M) float64 heights. dx, dy: grid spacing. keep: how far above the
+            higher neighbour a thin crest is lowered to.
+
+    Returns:
+        ``target`` (N-2, M-2): the height each thin crest is lowered to (the
+        lowest over its thin lines), ``inf`` elsewhere; ``thin`` (3, N-2, M-2)
+        bool per line of :func:`_lines`; ``a_higher`` (3, N-2, M-2) bool: the
+        line's first neighbour is at least as high as its second.
+    """
+    c = h[1:-1, 1:-1]
+    target = np.full(c.shape, np.inf)
+    thin_lines, a_higher = [], []
+    for a, b, length, _ in _lines(h, dx, dy):
+        m = np.maximum(a, b)
+        p = c - m
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = length * 0.5 * p * (1.0 / (c - a) + 1.0 / (c - b))
+        thin = (p >= crest_p) & (w < feature_w)
+        target = np.where(thin, np.minimum(target, m + keep), target)
+        thin_lines.append(thin)
+        a_higher.append(a >= b)
+    return target, np.stack(thin_lines), np.stack(a_higher)
+
+
+def _feature_crests(
+    h: np.ndarray, dx: float, dy: float, crest_p: float, feature_w: float, keep: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`feature_crests_reference` by the numba kernel (one pass over the vertices)."""
+    from saucerfab.relief_kernels import feature_crests
+
+    # the lines' lengths in _lines' order, which the kernel's offsets (_DI, _DJ) follow
+    lengths = np.array([length for _, _, length, _ in _lines(h, dx, dy)], np.float64)
+    return feature_crests(np.ascontiguousarray(h, np.float64), lengths, float(crest_p), float(feature_w),
+                          float(keep))
+
+
 def crest_widths(heights: np.ndarray, dx: float, dy: float, min_height: float) -> np.ndarray:
     """Width at half prominence of each crest vertex; ``inf`` where there is none.
 
@@ -369,18 +417,9 @@ def blunt_thin_crests(
     clean = False
     for sweeps in range(1, max_sweeps + 1):
         c = h[1:-1, 1:-1]
-        target = np.full(c.shape, np.inf)  # the height each thin crest is lowered to
-        thin_any = np.zeros(c.shape, bool)
-        raise_to: list[tuple[np.ndarray, np.ndarray, float, tuple[int, int]]] = []
-        for a, b, length, off in _lines(h, dx, dy):
-            m = np.maximum(a, b)
-            p = c - m
-            with np.errstate(divide="ignore", invalid="ignore"):
-                w = length * 0.5 * p * (1.0 / (c - a) + 1.0 / (c - b))
-            thin = (p >= crest_p) & (w < feature_w)
-            thin_any |= thin
-            target = np.where(thin, np.minimum(target, m + keep), target)
-            raise_to.append((thin, a >= b, length, off))
+        target, thin_lines, a_higher = _feature_crests(h, dx, dy, crest_p, feature_w, keep)
+        thin_any = thin_lines.any(axis=0)
+        raise_to = [(thin_lines[k], a_higher[k], off) for k, (_, _, _, off) in enumerate(_lines(h, dx, dy))]
         # the wall rule's widths, computed once per sweep (this runs on every trial step of the optimizer)
         ww = None if min_wall is None else wall_widths(h, dx, dy, min_wall, rise)
         wall_thin = ww is not None and bool((ww < wall_w).any())
@@ -399,13 +438,13 @@ def blunt_thin_crests(
         if stuck.any():
             n_cols = h.shape[1]
             flat_h = h.reshape(-1)  # a view: writes go into h
-            for thin, a_higher, _, (di, dj) in raise_to:
+            for thin, a_hi, (di, dj) in raise_to:
                 sel = stuck & thin
                 if not sel.any():
                     continue
                 ii, jj = np.nonzero(sel)
                 # neighbour a sits at (i - di, j - dj), b at (i + di, j + dj), full-grid indices
-                side = np.where(a_higher[sel], -1, 1)
+                side = np.where(a_hi[sel], -1, 1)
                 ni, nj = ii + 1 + side * di, jj + 1 + side * dj
                 flat = ni * n_cols + nj
                 want = np.minimum(c_after[ii, jj] - keep, hi_a[ni, nj])

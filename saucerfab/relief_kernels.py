@@ -1,4 +1,4 @@
-"""Numba kernels of the wall rule (imported by :mod:`saucerfab.relief` when it runs).
+"""Numba kernels of the wall rule and the feature rule (imported by :mod:`saucerfab.relief` when it runs).
 
 The optimizer projects every trial step onto printable relief
 (:class:`saucerfab.optimize.printable.CrestProjection`), so the wall rule runs
@@ -8,15 +8,18 @@ about a hundred small numpy calls. Here each vertex walks its three mesh
 lines in a plain loop: a whole projection step on the 150 x 150 grid took
 2.2-5.9x less time (``benchmarks/bench_relief.py``; in a design the sparse
 stage, whose spikes make thin crests, about 0.7x: benchmarks/RESULTS.md).
+The feature rule's pass (:func:`feature_crests`) was a dozen whole-grid numpy
+operations per line and sweep, about 1.2 ms a projection step; here one loop.
 
 The kernels do the same float64 operations, in the same order, as the numpy
 code they replace, which stays in :mod:`saucerfab.relief` as their reference
 (:func:`~saucerfab.relief.wall_widths_reference`,
-:func:`~saucerfab.relief.bisect_tops_reference`); the tests hold them
+:func:`~saucerfab.relief.bisect_tops_reference`,
+:func:`~saucerfab.relief.feature_crests_reference`); the tests hold them
 equal bit for bit, since an optimizer iterate that differs in the last bit
 sends the solver down another path.
 
-Compiled code is cached on disk (``cache=True``). The two entry points run
+Compiled code is cached on disk (``cache=True``). The two wall-rule entry points run
 their vertices (crests) on numba's worker threads: each result is computed
 by one thread alone, so it does not depend on the thread count; with two
 threads a projection step took 1.5-2x less than serial (1.7 against 2.7 ms
@@ -34,6 +37,41 @@ from numba import njit, prange
 #: lengths and what lies beyond the border come from the caller (relief._WALL_LINES)
 _DI = (0, 1, 1)
 _DJ = (1, 0, 1)
+
+
+@njit(cache=True, error_model="numpy")
+def feature_crests(h: np.ndarray, lengths: np.ndarray, crest_p: float, feature_w: float,
+                   keep: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The feature rule's thin crests (relief.feature_crests_reference, bit for bit).
+
+    Args:
+        h: (N, M) float64 heights. lengths: (3,) the lines' lengths.
+    Returns:
+        ``target`` (N-2, M-2), ``thin`` and ``a_higher`` (3, N-2, M-2) bool.
+    """
+    rows, cols = h.shape
+    target = np.full((rows - 2, cols - 2), np.inf)
+    thin = np.zeros((3, rows - 2, cols - 2), np.bool_)
+    a_higher = np.zeros((3, rows - 2, cols - 2), np.bool_)
+    # one thread: about 0.1 ms on 150 x 150, less than waking the workers costs
+    for i in range(1, rows - 1):
+        for j in range(1, cols - 1):
+            c = h[i, j]
+            t = np.inf
+            for line in range(3):
+                di, dj = _DI[line], _DJ[line]
+                a, b = h[i - di, j - dj], h[i + di, j + dj]
+                m = np.maximum(a, b)
+                p = c - m
+                # numpy's order: ((length * 0.5) * p) * (1 / (c - a) + 1 / (c - b)); 1/0 = inf
+                w = lengths[line] * 0.5 * p * (1.0 / (c - a) + 1.0 / (c - b))
+                is_thin = (p >= crest_p) and (w < feature_w)
+                thin[line, i - 1, j - 1] = is_thin
+                a_higher[line, i - 1, j - 1] = a >= b
+                if is_thin:
+                    t = np.minimum(t, m + keep)
+            target[i - 1, j - 1] = t
+    return target, thin, a_higher
 
 
 @njit(cache=True)

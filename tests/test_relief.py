@@ -200,12 +200,26 @@ def test_the_wall_kernels_equal_their_numpy_reference_bit_for_bit(seed: int) -> 
     assert fast[1].any() and not fast[1].all()  # both outcomes exercised
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_the_feature_kernel_equals_its_numpy_reference_bit_for_bit(seed: int) -> None:
+    h = _rough(seed)
+    h[3:8, 4:9] = 1.25  # a plateau: equal neighbours divide by zero (inf and NaN widths)
+    h[10, 10] = h[10, 9] = h[10, 11] = 7.0
+    for dx, dy, crest_p, feature_w in ((0.67, 0.5, 0.3, 0.4), (0.5, 0.5, 1.0, 2.0), (1.0, 0.25, 0.0, 0.3)):
+        fast = relief._feature_crests(h, dx, dy, crest_p, feature_w, 0.01)
+        ref = relief.feature_crests_reference(h, dx, dy, crest_p, feature_w, 0.01)
+        assert all(np.array_equal(f, r) for f, r in zip(fast, ref, strict=True))
+        assert fast[1].dtype == ref[1].dtype == bool and fast[1].shape == (3, h.shape[0] - 2, h.shape[1] - 2)
+    assert fast[1].any() and np.isfinite(fast[0]).any() and not np.isfinite(fast[0]).all()
+
+
 def test_blunting_by_the_kernels_equals_blunting_by_the_reference(monkeypatch: pytest.MonkeyPatch) -> None:
     h = _rough(7, 40, 40)
     lo, hi = h - 1.5, h + 1.5
     fast = blunt_thin_crests(h, 0.67, 0.67, 0.3, lo, hi, min_wall=1.0, tighten=1e-3)
     monkeypatch.setattr(relief, "wall_widths", relief.wall_widths_reference)
     monkeypatch.setattr(relief, "_bisect_tops", relief.bisect_tops_reference)
+    monkeypatch.setattr(relief, "_feature_crests", relief.feature_crests_reference)
     ref = blunt_thin_crests(h, 0.67, 0.67, 0.3, lo, hi, min_wall=1.0, tighten=1e-3)
     assert fast.sweeps > 1 and fast.lowered > 10
     assert np.array_equal(fast.heights, ref.heights)

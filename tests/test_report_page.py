@@ -7,12 +7,15 @@ and keeps the screenshots in ``out/test-artifacts/`` to be looked at.
 
 from __future__ import annotations
 
+import io
 import json
 import re
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
+from PIL import Image
 
 import browser
 from saucerfab.cli import main
@@ -96,3 +99,21 @@ def test_report_opens_in_chromium_with_a_drawn_3d_view(folders, which):
     assert not result.errors, result.errors
     assert browser.canvas_is_drawn(result.element_png("canvas"))
     (ARTIFACTS / f"report_{which}_3d.png").write_bytes(result.element_png("canvas"))
+
+
+def test_png_reuses_an_encoding_only_for_the_same_pixels() -> None:
+    from saucerfab import report_page
+
+    rgb = np.random.default_rng(3).integers(0, 256, (40, 40, 3), dtype=np.uint8)
+    first = report_page._png(rgb, 32)
+    again = report_page._png(rgb.copy(), 32)
+    assert again is first  # the cached bytes, by content
+    changed = rgb.copy()
+    changed[5, 7, 1] ^= 1
+    assert report_page._png(changed, 32) != first
+    assert report_page._png(rgb, None) != first  # another size is another picture
+    with Image.open(io.BytesIO(first)) as im:
+        assert im.size == (32, 32)
+    for k in range(report_page._PNG_CACHE_ENTRIES + 2):  # bounded
+        report_page._png(np.full((4, 4, 3), k, np.uint8))
+    assert len(report_page._PNG_CACHE) == report_page._PNG_CACHE_ENTRIES

@@ -242,7 +242,7 @@ def solve(
         if should_stop is not None and should_stop():
             reason = "stopped"
             break
-        if not (bool(torch.isfinite(g_h).all()) and bool(torch.isfinite(g_c).all())):
+        if not (_all_finite(g_h) and _all_finite(g_c)):
             # a renderer defect, not a property of the design: every direction
             # would be NaN and every trial rejected; stop and say so
             reason = "nonfinite_gradient"
@@ -333,6 +333,18 @@ def _gradients(e: torch.Tensor, h: torch.Tensor, c: torch.Tensor) -> tuple[torch
     g_h = hh.grad if hh.grad is not None else torch.zeros_like(h)
     g_c = cc.grad if cc.grad is not None else torch.zeros_like(c)
     return g_h, g_c
+
+
+def _all_finite(t: torch.Tensor) -> bool:
+    """Whether every element of ``t`` is finite.
+
+    The sum is finite when every element is (one fast reduction, no boolean
+    copy: this runs every iteration); only a non-finite sum, which an overflow
+    of finite elements also gives, is checked element by element.
+    """
+    import torch
+
+    return math.isfinite(float(t.sum())) or bool(torch.isfinite(t).all())
 
 
 def _max_feasible_step(

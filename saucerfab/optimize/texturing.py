@@ -180,7 +180,9 @@ def texture_saucer(
     face_uvs = uv_direct.copy()
     face_panel = np.zeros(nf, np.int8)
 
-    panels = [np.clip(images[n], 0, 1).astype(np.float64) for n in names]
+    # float64 copies, clipped as they are made: each big array made once (first
+    # touches of fresh memory cost ~10 us a page on the machines measured)
+    panels = [np.clip(images[n], 0, 1, out=np.empty(images[n].shape, np.float64)) for n in names]
     for p, view in enumerate(rig.views[1:], start=1):
         if view.faces.shape[0] == 0:
             continue
@@ -208,8 +210,14 @@ def texture_saucer(
             flat[hit] = 0.5 * (flat[hit] + acc[hit] / cnt[hit, None])
     if eyes:
         _blend_eyes(panels, face_uvs, face_panel, face_view, h, images, eyes, design_weight)
-    texture = np.concatenate(panels, axis=1)
-    texture8 = np.clip(np.rint(texture * 255), 0, 255).astype(np.uint8)
+    # panel by panel, in place: the same values as clip(rint(concatenate(panels) * 255))
+    # without three atlas-sized float64 temporaries (about 0.4 s of page faults at T = 1024)
+    texture8 = np.empty((t, t * k, 3), np.uint8)
+    for p, panel in enumerate(panels):
+        panel *= 255
+        np.rint(panel, out=panel)
+        np.clip(panel, 0, 255, out=panel)
+        texture8[:, p * t:(p + 1) * t] = panel
     return TextureResult(texture8, face_uvs.astype(np.float32), face_view, face_panel)
 
 

@@ -175,6 +175,19 @@ def test_solver_stops_on_a_nonfinite_gradient() -> None:
     assert torch.equal(res.h, z)
 
 
+def test_all_finite_checks_each_element_only_when_the_sum_is_not_finite() -> None:
+    from saucerfab.optimize.solver import _all_finite
+
+    big = torch.finfo(torch.float32).max
+    assert _all_finite(torch.tensor([1.0, -2.0, 3.0]))
+    assert _all_finite(torch.tensor([big, big, big]))  # the sum overflows, every element is finite
+    assert _all_finite(torch.tensor([big, -big]))
+    for bad in (float("nan"), float("inf"), -float("inf")):
+        assert not _all_finite(torch.tensor([1.0, bad, 3.0]))
+        assert not _all_finite(torch.tensor([big, big, bad]))
+    assert not _all_finite(torch.tensor([float("inf"), -float("inf")]))  # inf - inf: NaN sum
+
+
 def test_solver_ends_at_once_when_a_fresh_direction_is_rejected() -> None:
     # Every move raises the energy (|c - c0| outweighs the linear pull), so the
     # first line search fails. Its direction came from fresh moments, which a
