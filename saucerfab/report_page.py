@@ -48,7 +48,7 @@ _MAX_PICTURE_BYTES = 16 << 20
 #: texture and the reference pictures are the same both times (about 0.15 s of encoding)
 _PNG_CACHE: "OrderedDict[tuple[bytes, tuple[int, ...], int | None], bytes]" = OrderedDict()
 _PNG_CACHE_ENTRIES = 8
-_PNG_CACHE_LOCK = threading.Lock()  # the studio and the batch pool write pages from threads
+_PNG_CACHE_LOCK = threading.Lock()  # pages may be written from several threads (the studio runs jobs on one)
 
 
 def _png(rgb: np.ndarray, max_px: int | None = None) -> bytes:

@@ -342,8 +342,6 @@ def _all_finite(t: torch.Tensor) -> bool:
     copy: this runs every iteration); only a non-finite sum, which an overflow
     of finite elements also gives, is checked element by element.
     """
-    import torch
-
     return math.isfinite(float(t.sum())) or bool(torch.isfinite(t).all())
 
 
