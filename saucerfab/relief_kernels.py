@@ -50,9 +50,10 @@ def feature_crests(h: np.ndarray, lengths: np.ndarray, crest_p: float, feature_w
         ``target`` (N-2, M-2), ``thin`` and ``a_higher`` (3, N-2, M-2) bool.
     """
     rows, cols = h.shape
-    target = np.full((rows - 2, cols - 2), np.inf)
-    thin = np.zeros((3, rows - 2, cols - 2), np.bool_)
-    a_higher = np.zeros((3, rows - 2, cols - 2), np.bool_)
+    n, m = max(rows - 2, 0), max(cols - 2, 0)  # a grid under 3 x 3 has no interior vertex
+    target = np.full((n, m), np.inf)
+    thin = np.zeros((3, n, m), np.bool_)
+    a_higher = np.zeros((3, n, m), np.bool_)
     # one thread: about 0.1 ms on 150 x 150, less than waking the workers costs
     for i in range(1, rows - 1):
         for j in range(1, cols - 1):

@@ -211,6 +211,10 @@ def test_the_feature_kernel_equals_its_numpy_reference_bit_for_bit(seed: int) ->
         assert all(np.array_equal(f, r) for f, r in zip(fast, ref, strict=True))
         assert fast[1].dtype == ref[1].dtype == bool and fast[1].shape == (3, h.shape[0] - 2, h.shape[1] - 2)
     assert fast[1].any() and np.isfinite(fast[0]).any() and not np.isfinite(fast[0]).all()
+    for shape in ((0, 0), (1, 5), (2, 2), (3, 2), (2, 7)):  # no interior vertex: empty findings, as numpy's
+        fast = relief._feature_crests(np.zeros(shape), 0.5, 0.5, 0.3, 0.4, 0.01)
+        ref = relief.feature_crests_reference(np.zeros(shape), 0.5, 0.5, 0.3, 0.4, 0.01)
+        assert [a.shape for a in fast] == [a.shape for a in ref]
 
 
 def test_blunting_by_the_kernels_equals_blunting_by_the_reference(monkeypatch: pytest.MonkeyPatch) -> None:
