@@ -419,7 +419,6 @@ def blunt_thin_crests(
         c = h[1:-1, 1:-1]
         target, thin_lines, a_higher = _feature_crests(h, dx, dy, crest_p, feature_w, keep)
         thin_any = thin_lines.any(axis=0)
-        raise_to = [(thin_lines[k], a_higher[k], off) for k, (_, _, _, off) in enumerate(_lines(h, dx, dy))]
         # the wall rule's widths, computed once per sweep (this runs on every trial step of the optimizer)
         ww = None if min_wall is None else wall_widths(h, dx, dy, min_wall, rise)
         wall_thin = ww is not None and bool((ww < wall_w).any())
@@ -438,13 +437,13 @@ def blunt_thin_crests(
         if stuck.any():
             n_cols = h.shape[1]
             flat_h = h.reshape(-1)  # a view: writes go into h
-            for thin, a_hi, (di, dj) in raise_to:
-                sel = stuck & thin
+            for k, (_, _, _, (di, dj)) in enumerate(_lines(h, dx, dy)):
+                sel = stuck & thin_lines[k]
                 if not sel.any():
                     continue
                 ii, jj = np.nonzero(sel)
                 # neighbour a sits at (i - di, j - dj), b at (i + di, j + dj), full-grid indices
-                side = np.where(a_hi[sel], -1, 1)
+                side = np.where(a_higher[k][sel], -1, 1)
                 ni, nj = ii + 1 + side * di, jj + 1 + side * dj
                 flat = ni * n_cols + nj
                 want = np.minimum(c_after[ii, jj] - keep, hi_a[ni, nj])
