@@ -15,6 +15,7 @@ An engine has ``slots`` (how many jobs to keep in flight), ``submit``,
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import logging
 import multiprocessing as mp
 import os
@@ -38,6 +39,8 @@ class InProcessEngine:
 
     name = "in-process"
     slots = 1
+    #: jobs run in the driver's thread: Ctrl-C must interrupt them there (see runner)
+    runs_jobs_here = True
     scratch_in_output = True
 
     def __init__(self) -> None:
@@ -83,6 +86,19 @@ def _init_pool_worker(events: Any, parent: int, threads: int) -> None:
         os.environ.setdefault(var, str(threads))
     set_event_sink(lambda job, stage: events.put((job, stage)))
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
+
+
+#: seconds a pool worker has to exit after SIGTERM before it is sent SIGKILL (Ctrl-C, a broken pool)
+STOP_GRACE_S = 5.0
+#: seconds a stopped pool's manager thread is waited for (it has nothing left to wait on by then)
+STOP_JOIN_S = 10.0
+
+
+def _alive(proc: Any) -> bool:
+    try:
+        return bool(proc.is_alive())
+    except Exception:  # noqa: BLE001 - a process object already closed is not alive
+        return False
 
 
 class LocalPoolEngine:
@@ -153,19 +169,38 @@ class LocalPoolEngine:
 
     @staticmethod
     def _terminate(pool: cf.ProcessPoolExecutor) -> None:
-        stop = getattr(pool, "terminate_workers", None)  # Python 3.14+
-        if stop is not None:
-            try:
-                stop()
-            except Exception:  # noqa: BLE001
-                pass
-        else:
-            for proc in list((getattr(pool, "_processes", None) or {}).values()):
-                try:
-                    proc.terminate()
-                except Exception:  # noqa: BLE001
-                    pass
-        pool.shutdown(wait=True, cancel_futures=True)
+        """Stop ``pool`` now, in bounded time: its workers killed, its jobs dropped.
+
+        Each worker gets SIGTERM, then SIGKILL after :data:`STOP_GRACE_S`, and is
+        reaped. Only then the driver's own copy of the result pipe's write end
+        is closed: a worker killed while it was sending a result leaves half a
+        message in the pipe, and the executor's manager thread, reading it,
+        would wait for the rest forever; with no writer left it reads EOF and
+        winds the pool up as broken. The manager thread is joined for at most
+        :data:`STOP_JOIN_S` (``shutdown(wait=True)`` could wait forever).
+        """
+        manager = getattr(pool, "_executor_manager_thread", None)
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        for proc in procs:
+            with contextlib.suppress(Exception):
+                proc.terminate()
+        deadline = time.monotonic() + STOP_GRACE_S
+        for proc in procs:
+            with contextlib.suppress(Exception):
+                proc.join(max(0.0, deadline - time.monotonic()))
+        for proc in procs:
+            with contextlib.suppress(Exception):
+                if proc.is_alive():
+                    proc.kill()
+                    proc.join(STOP_GRACE_S)
+        if all(not _alive(proc) for proc in procs):
+            writer = getattr(getattr(pool, "_result_queue", None), "_writer", None)
+            with contextlib.suppress(Exception):
+                if writer is not None:
+                    writer.close()
+        pool.shutdown(wait=False, cancel_futures=True)
+        if manager is not None and manager is not threading.current_thread():
+            manager.join(STOP_JOIN_S)
 
     def close(self, cancel: bool = False) -> None:
         if self._pool is None:

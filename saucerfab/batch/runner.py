@@ -20,6 +20,8 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import signal
+import threading
 import time
 from collections import deque
 from collections.abc import Iterator
@@ -67,6 +69,42 @@ def _locked(out: Path) -> Iterator[None]:
 
     with exclusive_lock(out / LOCK_NAME, busy):
         yield
+
+
+@contextlib.contextmanager
+def _interrupts_between_jobs(engine: Any) -> Iterator[threading.Event]:
+    """While a batch runs on worker processes or a cluster, SIGINT and SIGTERM only
+    set the flag this yields; :func:`_drive` stops the batch at its next turn
+    (within a quarter of a second, or once the job it is writing is written).
+
+    Why: a ``KeyboardInterrupt`` raised at an arbitrary point of the driver can
+    land inside ``concurrent.futures``' own bookkeeping (``wait`` takes every
+    future's lock in a Python loop; ``submit`` registers a job in two steps),
+    leaving a lock held by a frame that is gone: the pool's manager thread
+    then waits on it forever and the batch never exits. With the in-process
+    engine a job runs in this thread for minutes, so there nothing changes
+    (Ctrl-C interrupts at once). A signal the process was started ignoring
+    stays ignored. Handlers can be set from the main thread only; from
+    another thread nothing changes either. The previous handlers
+    are restored on exit, so a second Ctrl-C during the clean-up interrupts it.
+    """
+    stop = threading.Event()
+    if getattr(engine, "runs_jobs_here", False) or threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        stop.set()
+
+    # a signal the process was started ignoring (``nohup``, ``cmd &``) stays ignored
+    saved = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)
+             if signal.getsignal(sig) is not signal.SIG_IGN}
+    try:
+        yield stop
+    finally:
+        for sig, old in saved.items():
+            if old is not None:  # None: a handler not set from Python, which cannot be put back
+                signal.signal(sig, old)
 
 
 def clean_stale(out: Path) -> list[Path]:
@@ -158,7 +196,7 @@ def run_batch(
 
     Raises:
         ConfigError: bad manifest, unreachable scheduler, output folder in use.
-        Interrupted: Ctrl-C (finished jobs are kept; the report says which).
+        Interrupted: Ctrl-C or SIGTERM (finished jobs are kept; the report says which).
     """
     if not isinstance(manifest, Manifest):
         manifest = load_manifest(manifest)
@@ -199,8 +237,9 @@ def run_batch(
         engine = make_engine(workers, scheduler, threads=threads_per_job)
         engine_name = engine.name
         try:
-            _drive(manifest, out, engine, outcomes, display, force, threads_per_job, report)
-        except (KeyboardInterrupt, Interrupted):  # Ctrl-C, SIGTERM (CLI), or a stage's own Interrupted
+            with _interrupts_between_jobs(engine) as stop:
+                _drive(manifest, out, engine, outcomes, display, force, threads_per_job, report, stop)
+        except (KeyboardInterrupt, Interrupted):  # Ctrl-C, SIGTERM, or a stage's own Interrupted
             state["name"] = "interrupted"
             engine.close(cancel=True)
             display.close()
@@ -235,7 +274,13 @@ def _drive(
     force: bool,
     threads_per_job: int,
     report: Any,
+    stop: threading.Event | None = None,
 ) -> None:
+    """Plan, then keep ``engine.slots`` jobs in flight until all are done; commit each result.
+
+    ``stop``: set by a signal (:func:`_interrupts_between_jobs`); checked once a
+    turn, where it raises ``KeyboardInterrupt`` (the caller's Ctrl-C path).
+    """
     plan = plan_batch(manifest, out, force=force)
     todo: deque[tuple[JobSpec, int]] = deque()
     early: list[JobOutcome] = []
@@ -295,6 +340,8 @@ def _drive(
             report()
         for job_id, stage in engine.events():
             display.stage(job_id, stage)
+        if stop is not None and stop.is_set():
+            raise KeyboardInterrupt
 
 
 def _listed_files(out: Path, job_id: str) -> list[str]:
