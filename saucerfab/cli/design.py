@@ -220,6 +220,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {what}: {enh.get('why', '')}")
     par = meta.get("parameters", {})
     if par.get("method_used"):  # which stages ran, and why (the product's choice under the default, auto)
+        from saucerfab.optimize.solver import SolverSettings
         from saucerfab.optimize.stages import SIGMA_SMALL
 
         names = [s["name"] for s in par.get("stages", [])]
@@ -229,7 +230,9 @@ def run(args: argparse.Namespace) -> int:
             why = (" (the small-sigma stage run: these pictures are used as they are)" if small
                    else " (the small-sigma stage skipped: these pictures have a clear subject)")
         print(f"  method {par['method_used']}{' (the default)' if par.get('method') == 'auto' else ''}: "
-              f"{', '.join(names)}{why}, at most {par['max_iters_used']} iterations a stage")
+              f"{', '.join(names)}{why}, at most {par['max_iters_used']} iterations a stage"
+              + (f" (or until {par['stall_window_used']} renders gain under {SolverSettings.tol * 100:g} % each)"
+                 if par.get("stall_window_used") else ""))
     for st in m.get("stages", []):
         print(
             f"  {st['name']:22s} {st['iterations']:4d} it  {st.get('seconds', float('nan')):6.1f} s  "

@@ -333,6 +333,7 @@ class _StageLoop:
 
         self.request, self.prep, self.rig, self.stages = request, prep, rig, stages
         self.cap = request.stage_cap(_enhanced(prep.enhancement))  # iterations per stage at most
+        self.stall_window = request.stall_window()  # renders without progress that end a stage
         #: the eyes of --eyes (the design eye first), or [] for the design eye alone (the paper)
         self.eyes = list(eyes or [])
         self.z0 = decal_height(prep.base)
@@ -503,6 +504,7 @@ class _StageLoop:
             energy_floor=sum(term_weight(spec, t, values) * t.floor(self.problem) for t, _ in self.energies if t.floor),
             # the sparse stage starts with vertices resting on their bounds (solver, item 4)
             boundary_rule="coordinate" if prox is not None else "global",
+            stall_window=self.stall_window,
         )
         try:
             res = solve(self.objective(spec, target_list), h, c, self.z, delta, settings, prox=prox, callback=cb,
@@ -660,6 +662,7 @@ def _parameters(
     d["rho"] = rho
     d["method_used"] = method_used(request.ablation, request.method)
     d["max_iters_used"] = request.stage_cap(_enhanced(enhancement))
+    d["stall_window_used"] = request.stall_window()
     d["stages"] = [asdict(s) for s in stages]
     d["enhancement_used"] = dict(enhancement or {})
     if target is not None:

@@ -18,7 +18,7 @@ from saucerfab.eyes import DEFAULT_IPD_MM, DESIGN_EYES_USAGE, EyeSpec, parse_eye
 from saucerfab.heightfield import HEIGHT_SCALE
 from saucerfab.images import FITS
 from saucerfab.optimize.energies import WEIGHTS
-from saucerfab.optimize.stages import ABLATION_STAGES, METHODS, check_weights, stage_cap, stages_for
+from saucerfab.optimize.stages import ABLATION_STAGES, METHODS, check_weights, stage_cap, stages_for, stall_window
 from saucerfab.profiles import DEFAULT_PRINTER
 from saucerfab.scene import VIEW_NAMES
 
@@ -273,6 +273,10 @@ class DesignRequest(_Weights):
                 they are read: ``prepare``).
         """
         return stage_cap(self.ablation, self.method, self.max_iters, enhanced)
+
+    def stall_window(self) -> int:
+        """Renders over which a stage must make progress, else it ends (0: the paper's rules only)."""
+        return stall_window(self.ablation, self.method)
 
     @classmethod
     def default(cls, name: str) -> object:

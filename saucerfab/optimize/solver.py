@@ -43,6 +43,13 @@ Stopping: the relative change of the objective is below ``tol`` (1e-4, the
 paper's) for ``patience`` accepted iterations in a row, or ``max_iters``.
 A patience above one keeps a single lucky flat step of the stochastic-looking
 Adamax trajectory from ending a stage early; ``patience=1`` is the paper verbatim.
+With ``stall_window`` = W > 0 a stage also ends when, over at least its last W
+renders (accepted trials and rejected ones alike), the objective fell by
+less than ``tol`` relative per render ("stalled"): a stage's tail where each
+accepted step takes five or six halvings moves the picture by a fraction of a
+percent for a third of the stage's renders (measured on rocket-chelsea's
+sparse stage: 51 of 122 renders for 0.2 % of E_visual), a tail the
+per-iteration rule misses because the rare accepted steps are not small.
 """
 
 from __future__ import annotations
@@ -88,6 +95,9 @@ class SolverSettings:
             change (the barrier's minimum, a large constant: with 22,500
             vertices and 44,402 faces it is about 3e5, dwarfing E_visual, so
             a relative change of the raw energy would end a stage at once).
+        stall_window: renders over which the objective must fall by ``tol``
+            relative per render on average, else the stage ends (module
+            docstring, Stopping); 0 turns the rule off (the paper's rules only).
     """
 
     lr_h: float = 2.5e-3
@@ -104,10 +114,13 @@ class SolverSettings:
     optimize_heights: bool = True
     energy_floor: float = 0.0
     boundary_rule: str = "global"
+    stall_window: int = 0
 
     def __post_init__(self) -> None:
         if self.boundary_rule not in ("global", "coordinate"):
             raise ValueError(f"boundary_rule must be 'global' or 'coordinate', got {self.boundary_rule!r}")
+        if self.stall_window < 0:
+            raise ValueError(f"stall_window must be 0 (off) or a number of renders, got {self.stall_window}")
 
 
 @dataclass(frozen=True)
@@ -232,6 +245,8 @@ def solve(
     if not math.isfinite(total):
         raise ValueError("the objective is not finite at the starting point")
     g_h, g_c = _gradients(e, h, c)
+    # (renders so far, objective) at the start and after each accepted step: the stall rule's history
+    marks: list[tuple[int, float]] = [(evaluations, total)]
     log: list[dict[str, float]] = []
     calm = 0
     rejected = 0
@@ -305,6 +320,10 @@ def solve(
         if calm >= s.patience:
             converged, reason = True, "tolerance"
             break
+        marks.append((evaluations, total))
+        if s.stall_window and _stalled(marks, s.stall_window, s.tol, s.energy_floor):
+            converged, reason = True, "stalled"
+            break
     return SolveResult(h, c, it, total, converged, log, time.perf_counter() - t0, evaluations, reason)
 
 
@@ -324,6 +343,22 @@ def _truncate_to_boundary(
     room_down = FRACTION_TO_BOUNDARY * (x - lo)  # d > 0 moves x down towards lo
     room_up = FRACTION_TO_BOUNDARY * (hi - x)
     return torch.where(d > 0, torch.minimum(d, room_down), torch.maximum(d, -room_up))
+
+
+def _stalled(marks: list[tuple[int, float]], window: int, tol: float, floor: float) -> bool:
+    """Whether the objective fell by less than ``tol`` relative per render over at least the last ``window`` renders.
+
+    ``marks``: (renders so far, objective) at the start and after each accepted
+    step, in order; the last is now. The window reaches back to the latest mark
+    at least ``window`` renders old (so it spans whole steps); with none that
+    old the rule waits.
+    """
+    n_now, e_now = marks[-1]
+    for n_then, e_then in reversed(marks[:-1]):
+        if n_now - n_then >= window:
+            fell = (e_then - e_now) / max(abs(e_then - floor), 1e-30)
+            return fell < tol * (n_now - n_then)
+    return False
 
 
 def _gradients(e: torch.Tensor, h: torch.Tensor, c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

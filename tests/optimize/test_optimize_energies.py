@@ -234,3 +234,46 @@ def test_proximal_stage_moves_few_vertices() -> None:
     assert moved[3] and moved[7]
     assert int(moved.sum()) == 2
     assert res.h[3] > 0.02 and res.h[7] < -0.02
+
+
+def test_stall_rule_judges_the_fall_per_render_over_its_window() -> None:
+    from saucerfab.optimize.solver import _stalled
+
+    # (renders so far, objective); floor 0, tol 1e-2: a 1 % fall per render is the line
+    steady = [(k, 100.0 * 0.97**k) for k in range(20)]  # 3 % a render
+    assert not _stalled(steady, 8, 1e-2, 0.0)
+    flat = [(0, 100.0), (6, 99.9), (12, 99.8), (18, 99.7)]  # 0.3 % over 18 renders
+    assert _stalled(flat, 16, 1e-2, 0.0)
+    assert not _stalled(flat[:3], 16, 1e-2, 0.0)  # no mark 16 renders old yet: wait
+    # the window reaches back to the latest mark at least `window` renders old (whole steps):
+    # from (2, 100) to (20, 80) the fall is 20 % over 18 renders, above 1 % a render
+    # (from (0, 200), 20 renders back, it would be 60 %: not the window)
+    assert not _stalled([(0, 200.0), (2, 100.0), (17, 99.0), (20, 80.0)], 16, 1e-2, 0.0)
+    assert _stalled([(0, 200.0), (2, 100.0), (17, 99.0), (20, 90.0)], 16, 1e-2, 0.0)  # 10 % over 18
+    # the floor: a fall of 1 above a floor of 99 is 100 %
+    assert not _stalled([(0, 100.0), (16, 99.0)], 16, 1e-2, 99.0)
+    assert _stalled([(0, 100.0), (16, 99.0)], 16, 1e-2, 0.0)
+
+
+def test_the_stall_rule_only_cuts_a_stage_short() -> None:
+    """With the rule the stage is the same run stopped early: the same iterates up to its stop."""
+    objective, target_h, _ = _quadratic_problem()
+    z = torch.zeros_like(target_h)
+    c0 = torch.full((target_h.shape[0], 3), 0.5, dtype=torch.float64)
+    runs = {}
+    for window in (0, 8):
+        seen: list[float] = []
+        settings = SolverSettings(max_iters=150, lr_h=0.01, lr_c=0.05, tol=1e-3, patience=10**6,
+                                  stall_window=window)
+        res = solve(objective, z.clone(), c0, z, 0.05, settings, callback=lambda it, e, p: seen.append(e))
+        runs[window] = (res, seen)
+    full, cut = runs[0], runs[8]
+    assert full[0].stop_reason == "max_iters" and full[0].iterations == 150
+    assert cut[0].stop_reason == "stalled" and 8 < cut[0].iterations < 150
+    assert cut[0].evaluations < full[0].evaluations
+    assert cut[1] == full[1][: len(cut[1])]
+
+
+def test_stall_window_must_not_be_negative() -> None:
+    with pytest.raises(ValueError, match="stall_window"):
+        SolverSettings(stall_window=-1)

@@ -271,6 +271,11 @@ def test_each_method_has_its_stage_cap_and_max_iters_overrides_it(tmp_path, caps
     assert STAGE_CAPS["auto"] == (120, 90) and stage_cap("full", "fast", enhanced=False) == 120
     assert stage_cap("full", "paper") == stage_cap("sparse_only") == STAGE_CAPS["paper"][1] == 400
     assert stage_cap("full", "paper", 7) == stage_cap("full", max_iters=7) == 7  # given: every stage, any method
+    # the stall rule: the default's and fast's, not the paper's (nor the ablations', which run as written)
+    from saucerfab.optimize.stages import stall_window
+
+    assert stall_window("full") == stall_window("full", "fast") == 16
+    assert stall_window("full", "paper") == stall_window("laplacian") == 0
     pics = (SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png")
     assert DesignRequest(*pics).stage_cap() == 120 and DesignRequest(*pics, max_iters=500).stage_cap() == 500
     assert DesignRequest(*pics, ablation="laplacian").stage_cap() == 400  # ablations run as the paper wrote them
@@ -296,6 +301,7 @@ def test_each_method_has_its_stage_cap_and_max_iters_overrides_it(tmp_path, caps
     out = run_design(DesignRequest(*photos, resolution=12, image_size=32), tmp_path / "q", progress=lambda *a: None)
     params = json.loads((out / "design.json").read_text())["parameters"]
     assert params["max_iters_used"] == 90  # the default's cap for photographs
+    assert params["stall_window_used"] == 16
     assert all(st["iterations"] <= 90 for st in json.loads((out / "design.json").read_text())["metrics"]["stages"])
 
 
