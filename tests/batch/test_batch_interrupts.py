@@ -32,6 +32,17 @@ ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "samples" / "batch"
 
 
+@pytest.fixture(autouse=True)
+def _sigint_as_in_a_terminal():
+    """SIGINT with Python's default handler, whatever this test process inherited: a suite started
+    in the background (``make test &``, CI) runs with SIGINT ignored, which the batch keeps ignored."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
 class _SlowPool:
     """An engine that never finishes a job; its first ``wait`` gets a SIGINT in the middle."""
 
@@ -56,6 +67,8 @@ class _SlowPool:
             self.interrupted_inside = True
             raise
         self.waits_finished += 1
+        if self.waits_finished > 100:  # the signal was lost: fail, do not spin for ever
+            raise AssertionError("the batch did not stop after SIGINT")
         return []
 
     def events(self) -> list[tuple[str, str]]:
