@@ -48,7 +48,7 @@ renders (accepted trials and rejected ones alike), the objective fell by
 less than ``tol`` relative per render ("stalled"): a stage's tail where each
 accepted step takes five or six halvings moves the picture by a fraction of a
 percent for a third of the stage's renders (measured on rocket-chelsea's
-sparse stage: 51 of 122 renders for 0.2 % of E_visual), a tail the
+sparse stage: its last 68 of 122 renders for 0.4 % of E_visual), a tail the
 per-iteration rule misses because the rare accepted steps are not small.
 """
 
