@@ -71,11 +71,22 @@ def _locked(out: Path) -> Iterator[None]:
         yield
 
 
+class _Deferral:
+    """Where a batch's Ctrl-C goes (:func:`_interrupts_between_jobs`): ``stop`` is set
+    by a signal once ``active`` (jobs are in the engine's hands); before that a
+    signal interrupts at once, as it always did (planning only reads files)."""
+
+    def __init__(self) -> None:
+        self.stop = threading.Event()
+        self.active = False
+
+
 @contextlib.contextmanager
-def _interrupts_between_jobs(engine: Any) -> Iterator[threading.Event]:
-    """While a batch runs on worker processes or a cluster, SIGINT and SIGTERM only
-    set the flag this yields; :func:`_drive` stops the batch at its next turn
-    (within a quarter of a second, or once the job it is writing is written).
+def _interrupts_between_jobs(engine: Any) -> Iterator[_Deferral]:
+    """While a batch's jobs run on worker processes or a cluster, SIGINT and SIGTERM
+    only set the flag this yields (once :func:`_drive` makes it ``active``, as its
+    jobs start); :func:`_drive` stops the batch at its next turn (within a
+    quarter of a second, or once the job it is writing is written).
 
     Why: a ``KeyboardInterrupt`` raised at an arbitrary point of the driver can
     land inside ``concurrent.futures``' own bookkeeping (``wait`` takes every
@@ -88,19 +99,21 @@ def _interrupts_between_jobs(engine: Any) -> Iterator[threading.Event]:
     another thread nothing changes either. The previous handlers
     are restored on exit, so a second Ctrl-C during the clean-up interrupts it.
     """
-    stop = threading.Event()
+    deferral = _Deferral()
     if getattr(engine, "runs_jobs_here", False) or threading.current_thread() is not threading.main_thread():
-        yield stop
+        yield deferral
         return
 
     def handler(signum: int, frame: Any) -> None:
-        stop.set()
+        if not deferral.active:
+            raise KeyboardInterrupt
+        deferral.stop.set()
 
     # a signal the process was started ignoring (``nohup``, ``cmd &``) stays ignored
     saved = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)
              if signal.getsignal(sig) is not signal.SIG_IGN}
     try:
-        yield stop
+        yield deferral
     finally:
         for sig, old in saved.items():
             if old is not None:  # None: a handler not set from Python, which cannot be put back
@@ -237,8 +250,8 @@ def run_batch(
         engine = make_engine(workers, scheduler, threads=threads_per_job)
         engine_name = engine.name
         try:
-            with _interrupts_between_jobs(engine) as stop:
-                _drive(manifest, out, engine, outcomes, display, force, threads_per_job, report, stop)
+            with _interrupts_between_jobs(engine) as deferral:
+                _drive(manifest, out, engine, outcomes, display, force, threads_per_job, report, deferral)
         except (KeyboardInterrupt, Interrupted):  # Ctrl-C, SIGTERM, or a stage's own Interrupted
             state["name"] = "interrupted"
             engine.close(cancel=True)
@@ -274,12 +287,14 @@ def _drive(
     force: bool,
     threads_per_job: int,
     report: Any,
-    stop: threading.Event | None = None,
+    deferral: _Deferral | None = None,
 ) -> None:
     """Plan, then keep ``engine.slots`` jobs in flight until all are done; commit each result.
 
-    ``stop``: set by a signal (:func:`_interrupts_between_jobs`); checked once a
-    turn, where it raises ``KeyboardInterrupt`` (the caller's Ctrl-C path).
+    ``deferral``: made ``active`` once the plan is made (from then on a signal
+    only sets its ``stop``, :func:`_interrupts_between_jobs`); ``stop`` is
+    checked once a turn, where it raises ``KeyboardInterrupt`` (the caller's
+    Ctrl-C path).
     """
     plan = plan_batch(manifest, out, force=force)
     todo: deque[tuple[JobSpec, int]] = deque()
@@ -306,6 +321,8 @@ def _drive(
     report(final=True)
     scratch = out / SCRATCH_NAME if engine.scratch_in_output else None
     inflight: dict[Any, tuple[JobSpec, int]] = {}
+    if deferral is not None:
+        deferral.active = True  # jobs go to the engine from here: a signal waits for the end of a turn
     while todo or inflight:
         while todo and len(inflight) < engine.slots:
             job, attempt = todo.popleft()
@@ -340,7 +357,7 @@ def _drive(
             report()
         for job_id, stage in engine.events():
             display.stage(job_id, stage)
-        if stop is not None and stop.is_set():
+        if deferral is not None and deferral.stop.is_set():
             raise KeyboardInterrupt
 
 

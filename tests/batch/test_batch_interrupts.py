@@ -100,29 +100,49 @@ def test_a_signal_stops_a_pool_batch_between_turns_not_inside_the_engine(
 
 
 def test_sigterm_is_deferred_the_same_way() -> None:
-    with _interrupts_between_jobs(_SlowPool()) as stop:
+    with _interrupts_between_jobs(_SlowPool()) as deferral:
+        deferral.active = True
         signal.raise_signal(signal.SIGTERM)
         time.sleep(0.01)
-        assert stop.is_set()
+        assert deferral.stop.is_set()
+
+
+def test_a_signal_while_the_batch_plans_interrupts_at_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Planning reads and hashes every job's inputs (long for a big batch) and touches no pool:
+    Ctrl-C there stops it at once, as before."""
+    engine = _SlowPool()
+    monkeypatch.setattr(runner_mod, "make_engine", lambda *a, **k: engine)
+
+    def plan(*a: Any, **k: Any) -> list[Any]:
+        signal.raise_signal(signal.SIGINT)
+        time.sleep(0.05)  # the handler runs here
+        raise AssertionError("planning went on after SIGINT")
+
+    monkeypatch.setattr(runner_mod, "plan_batch", plan)
+    with pytest.raises(Interrupted):
+        run_batch(_manifest(tmp_path), tmp_path / "out", workers=2)
+    assert engine.waits_finished == 0 and engine.closed_with is True
 
 
 def test_in_process_jobs_are_interrupted_at_once() -> None:
-    with _interrupts_between_jobs(InProcessEngine()) as stop:
+    with _interrupts_between_jobs(InProcessEngine()) as deferral:
+        deferral.active = True
         assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
         with pytest.raises(KeyboardInterrupt):
             signal.raise_signal(signal.SIGINT)
             time.sleep(0.01)
-        assert not stop.is_set()
+        assert not deferral.stop.is_set()
 
 
 def test_an_ignored_signal_stays_ignored() -> None:
     old = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        with _interrupts_between_jobs(_SlowPool()) as stop:
+        with _interrupts_between_jobs(_SlowPool()) as deferral:
+            deferral.active = True
             assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
             signal.raise_signal(signal.SIGINT)
             time.sleep(0.01)
-            assert not stop.is_set()
+            assert not deferral.stop.is_set()
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     finally:
         signal.signal(signal.SIGINT, old)
