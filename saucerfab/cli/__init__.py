@@ -14,6 +14,7 @@ starts without importing torch.
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import os
 import sys
@@ -137,5 +138,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
 
-def entry() -> None:  # console script
-    sys.exit(main())
+def entry() -> None:  # console script (and ``python -m saucerfab``)
+    """Run :func:`main` on the process's arguments and exit with its code.
+
+    The objects left when a command ends are frozen out of the cyclic garbage
+    collector first (:func:`gc.freeze`): Python's shutdown would otherwise scan
+    every one of them (about 290,000 after a design: torch, numba, Mitsuba),
+    which took 0.9 s of the 1.1 s between the end of a design and the end of its
+    process. The process's memory goes back to the system as a whole; the
+    shutdown itself (atexit handlers, threads joined, modules and files closed)
+    runs as before. Only here, not in :func:`main`: a process that goes on (a
+    test, a server) keeps its collector as it was.
+    """
+    code = main()
+    gc.freeze()
+    sys.exit(code)

@@ -1,8 +1,7 @@
 """The numba OBJ parser (``saucerfab.check.readers.obj_fast``) against the numpy/regex reference in ``obj``.
 
-Each file is read twice through ``read_obj``: once with the fast-path
-threshold at 0 (every file tries the numba parser) and once with it out of
-reach (the reference). The two must give the same ``MeshData``, bit for
+Each file is read twice through ``read_obj``: once with every file trying
+the numba parser and once with none (the reference). The two must give the same ``MeshData``, bit for
 bit, or the same ``ReadError`` code; and files the fast path does not handle
 must really fall back (checked by counting its successes).
 """
@@ -31,7 +30,7 @@ def _png() -> bytes:
 
 
 def _read(tmp_path: Path, data: bytes, fast: bool, monkeypatch: pytest.MonkeyPatch, limits: Limits = DEFAULT_LIMITS):
-    monkeypatch.setattr(obj, "FAST_OBJ_BYTES", 0 if fast else 1 << 62)
+    monkeypatch.setattr(obj, "_try_fast_parser", lambda n_bytes: fast)
     p = tmp_path / "m.obj"
     p.write_bytes(data)
     try:
@@ -230,3 +229,35 @@ def test_numbers_are_bit_equal_to_the_reference(tmp_path, monkeypatch, fast_hits
 
 def test_warm_up_runs() -> None:
     assert obj_fast.warm_up()
+
+
+def test_numba_started_tells_a_cold_process_from_a_warm_one() -> None:
+    """``saucerfab.warmup.numba_started`` reads an attribute numba makes on first use: a
+    fresh process says False until a kernel has run, then True (a numba release that
+    renamed it would fail here, not quietly keep the slow parser)."""
+    import subprocess
+    import sys
+
+    script = (
+        "from saucerfab.warmup import numba_started\n"
+        "import numba\n"
+        "before = numba_started()\n"
+        "numba.njit(lambda x: x + 1)(1)\n"
+        "print(before, numba_started())\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, text=True, timeout=120)
+    assert proc.stdout.split() == ["False", "True"]
+
+
+@pytest.mark.parametrize("started", [False, True])
+def test_the_fast_parser_is_tried_from_a_smaller_size_once_numba_has_started(
+    started: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import saucerfab.warmup
+
+    monkeypatch.setattr(saucerfab.warmup, "numba_started", lambda: started)
+    assert obj.FAST_OBJ_BYTES_WARM < obj.FAST_OBJ_BYTES
+    assert obj._try_fast_parser(obj.FAST_OBJ_BYTES)
+    assert not obj._try_fast_parser(obj.FAST_OBJ_BYTES_WARM - 1)
+    assert obj._try_fast_parser(obj.FAST_OBJ_BYTES_WARM) is started
+    assert obj._try_fast_parser(obj.FAST_OBJ_BYTES - 1) is started

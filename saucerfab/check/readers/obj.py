@@ -42,6 +42,17 @@ MAX_MTL_BYTES = 16 << 20
 FAST_OBJ_BYTES = 8 << 20
 """OBJ files this large (after joining continued lines) try the numba parser, :mod:`.obj_fast`, first: below
 about 8 MB the 1.5 s of importing numba and loading its kernels in a fresh process outweighs the gain."""
+FAST_OBJ_BYTES_WARM = 1 << 20
+"""The same once numba has started in this process (:func:`saucerfab.warmup.numba_started`: a design's quick
+verify, an export's verify): loading the parser's cached kernel then takes about 40 ms, and the trial export's
+2.9 MB OBJ is read in 20 ms instead of 0.2-0.45 s. Below 1 MB the numpy/regex parser takes less than the load."""
+
+
+def _try_fast_parser(n_bytes: int) -> bool:
+    """Whether :func:`read_obj` tries :mod:`.obj_fast` on a file of ``n_bytes`` (the one place that decides)."""
+    from saucerfab.warmup import numba_started
+
+    return n_bytes >= FAST_OBJ_BYTES or (n_bytes >= FAST_OBJ_BYTES_WARM and numba_started())
 
 
 @dataclass
@@ -135,7 +146,7 @@ def read_obj(path: Path, data: bytes, limits: Limits, res: Resources | None = No
         data = data.replace(b"\\\r\n", b" ").replace(b"\\\n", b" ")
         b.note("continued_lines", "OBJ statements continued with a trailing backslash were joined")
     parsed = None
-    if len(data) >= FAST_OBJ_BYTES:  # the numba parser (obj_fast); None where it leaves the file to _parse
+    if _try_fast_parser(len(data)):  # the numba parser (obj_fast); None where it leaves the file to _parse
         from saucerfab.check.readers.obj_fast import parse as parse_fast
 
         parsed = parse_fast(data, limits)
