@@ -45,7 +45,7 @@ from saucerfab import __version__
 from saucerfab.errors import DesignError, SaucerfabError
 from saucerfab.fileio import atomic_dir
 from saucerfab.heightfield import make_grid, triangulate
-from saucerfab.imageio import PixelLimitError, npy_header, open_bounded, png_bytes
+from saucerfab.imageio import PixelLimitError, npy_header, open_bounded, png_bytes_many
 from saucerfab.scene import Scene, scene_from_dict, scene_to_dict
 
 SCHEMA = "saucerfab.design/1"
@@ -177,12 +177,12 @@ def save_design(
     files = {
         "heights.npy": _npy_bytes(np.asarray(design.heights, np.float64)),
         "base_heights.npy": _npy_bytes(np.asarray(design.base_heights, np.float64)),
-        "texture.png": png_bytes(design.texture),
         "face_uvs.npy": _npy_bytes(np.asarray(design.face_uvs, np.float32)),
         "face_view.npy": _npy_bytes(np.asarray(design.face_view, np.uint8)),
     }
-    for view, img in sorted(design.references.items()):
-        files[reference_name(view)] = png_bytes(img)
+    pictures = {"texture.png": design.texture}
+    pictures.update({reference_name(view): img for view, img in sorted(design.references.items())})
+    files.update(png_bytes_many(pictures))
     for name, data in (previews or {}).items():
         files[f"previews/{name}"] = data
     files.update(extra_files or {})

@@ -248,7 +248,8 @@ def export_design(
     t = step("load", t)
 
     from saucerfab.fabricate.atlas import TOP_SHARE, build_uvmap, layout_page
-    from saucerfab.fabricate.bake import bake_page, png_bytes, vertex_colors
+    from saucerfab.fabricate.bake import ATLAS_PNG_LEVEL, bake_page, vertex_colors
+    from saucerfab.imageio import png_bytes_many
     from saucerfab.fabricate.scene_json import scene_json_bytes
     from saucerfab.fabricate.solid import build_solid
     from saucerfab.fabricate.textured import TexturedMesh
@@ -279,7 +280,10 @@ def export_design(
     timings["inpaint"] = bake_stats["inpaint_s"]
     timings["page"] = timings["bake"] - bake_stats["bake_s"] - bake_stats["inpaint_s"]
     timings["bake"] = bake_stats["bake_s"]
-    png = png_bytes(page)
+    # the atlas and the reference pictures that travel with the print, encoded side by side
+    refs = {reference_name(v): img for v, img in sorted(dsg.references.items())}
+    encoded = png_bytes_many({"": page, **refs}, ATLAS_PNG_LEVEL)
+    png = encoded.pop("")
     t = step("encode", t)
 
     mesh = TexturedMesh(
@@ -310,7 +314,7 @@ def export_design(
     scene_bytes = scene_json_bytes(scene, solid)
     extra = {"scene.json": scene_bytes}
     # the pictures as the design meant them travel with the print, so 'saucerfab verify' needs only this folder
-    extra.update({reference_name(v): png_bytes(img) for v, img in sorted(dsg.references.items())})
+    extra.update(encoded)
     all_files = registry.merge_files(per_format, extra)
     summary = {
         "schema": "saucerfab.export/1",

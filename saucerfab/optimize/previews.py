@@ -188,28 +188,30 @@ def make_previews(
     import torch
 
     from saucerfab import report
+    from saucerfab.imageio import png_bytes_many
     from saucerfab.optimize.stages import SIGMA_SMALL
 
     views = view_images(design, rig)
-    pngs: dict[str, bytes] = {}
-    for name, img in views.items():
-        pngs[f"{name}_view.png"] = report.to_png_bytes(img)
-    pngs["composite.png"] = report.to_png_bytes(composite_image(design, rig))
-    pngs["height_change.png"] = report.to_png_bytes(
-        report.height_change_map(design.base_heights, design.heights, design.scene.saucer.delta)
-    )
+    # the pictures first, then all encoded side by side (png_bytes_many)
+    # (each made 8-bit at once: a float64 panel of three pictures is tens of MB)
+    u8 = report.as_uint8_rgb
+    pictures: dict[str, np.ndarray] = {f"{name}_view.png": u8(img) for name, img in views.items()}
+    pictures["composite.png"] = u8(composite_image(design, rig))
+    pictures["height_change.png"] = u8(report.height_change_map(
+        design.base_heights, design.heights, design.scene.saucer.delta
+    ))
     panels = []
     for name in views:
         panels.append((f"input: {name}", prep.render[name]))
         panels.append((f"result: {name}", views[name]))
-    pngs["side_by_side.png"] = report.to_png_bytes(report.side_by_side(panels))
+    pictures["side_by_side.png"] = u8(report.side_by_side(panels))
     # what the optimizer was given: each input as meant, its foreground mask, its enhanced target
     given = []
     for name in views:
         given.append((f"input: {name}", prep.render[name]))
         given.append((f"mask: {name}", report.mask_overlay(prep.render[name], prep.masks[name])))
         given.append((f"target: {name}", prep.enhanced[name]))
-    pngs["inputs_targets.png"] = report.to_png_bytes(report.side_by_side(given))
+    pictures["inputs_targets.png"] = u8(report.side_by_side(given))
     with torch.no_grad():
         h = torch.as_tensor(design.heights.reshape(-1), dtype=torch.float32)
         soft = rig.render(h, torch.as_tensor(colors, dtype=torch.float32), SIGMA_SMALL)
@@ -217,7 +219,8 @@ def make_previews(
     for view, img in zip(rig.views, soft):
         opt_panels.append((f"enhanced target: {view.name}", prep.enhanced[view.name]))
         opt_panels.append((f"optimized colours: {view.name}", img.numpy()))
-    pngs["optimized_colors.png"] = report.to_png_bytes(report.side_by_side(opt_panels))
+    pictures["optimized_colors.png"] = u8(report.side_by_side(opt_panels))
+    pngs = png_bytes_many(pictures)
     if log:
         pngs["energies.png"] = report.energy_plot(log)
     return pngs, final_visual_error(design, rig, prep, views)
