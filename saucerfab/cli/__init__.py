@@ -147,8 +147,10 @@ def entry() -> None:  # console script (and ``python -m saucerfab``)
     which took 0.9 s of the 1.1 s between the end of a design and the end of its
     process. The process's memory goes back to the system as a whole; the
     shutdown itself (atexit handlers, threads joined, modules and files closed)
-    runs as before. Only here, not in :func:`main`: a process that goes on (a
-    test, a server) keeps its collector as it was.
+    runs as before. Only here, after :func:`main` has returned, and not in
+    :func:`main` itself: a process that calls it and goes on (the tests) keeps
+    its collector as it was, and a long-lived command (``studio``, ``batch``)
+    runs with the collector as usual until its way out.
     """
     code = main()
     gc.freeze()

@@ -249,10 +249,10 @@ def export_design(
 
     from saucerfab.fabricate.atlas import TOP_SHARE, build_uvmap, layout_page
     from saucerfab.fabricate.bake import ATLAS_PNG_LEVEL, bake_page, vertex_colors
-    from saucerfab.imageio import png_bytes_many
     from saucerfab.fabricate.scene_json import scene_json_bytes
     from saucerfab.fabricate.solid import build_solid
     from saucerfab.fabricate.textured import TexturedMesh
+    from saucerfab.imageio import png_bytes_many
 
     solid = build_solid(dsg, scene.mm_per_unit, opts, profile)
     bbox = solid.bbox_mm
