@@ -113,12 +113,10 @@ def png_bytes_many(images: Mapping[str, np.ndarray], compress_level: int = PNG_C
     Returns:
         name -> PNG bytes, in the order of ``images``.
     """
+    from saucerfab.machine import usable_cores
+
     names = list(images)
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        cores = os.cpu_count() or 1
-    threads = min(len(names), cores, PNG_THREADS_MAX)
+    threads = min(len(names), usable_cores(), PNG_THREADS_MAX)
     if threads <= 1:
         return {n: png_bytes(images[n], compress_level) for n in names}
     from concurrent.futures import ThreadPoolExecutor

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from saucerfab import imageio
+from saucerfab import imageio, machine
 from saucerfab.imageio import png_bytes, png_bytes_many
 
 
@@ -26,7 +26,7 @@ def _pictures() -> dict[str, np.ndarray]:
 def test_png_bytes_many_gives_the_bytes_of_one_at_a_time_in_order(level: int, monkeypatch: pytest.MonkeyPatch) -> None:
     pictures = _pictures()
     # as many threads as pictures, whatever this machine's cores
-    monkeypatch.setattr(imageio.os, "sched_getaffinity", lambda pid: set(range(8)), raising=False)
+    monkeypatch.setattr(machine, "usable_cores", lambda: 8)
     many = png_bytes_many(pictures, level)
     assert list(many) == list(pictures)
     for name, img in pictures.items():
@@ -37,8 +37,17 @@ def test_png_bytes_many_gives_the_bytes_of_one_at_a_time_in_order(level: int, mo
 
 def test_png_bytes_many_on_one_core_and_with_one_picture(monkeypatch: pytest.MonkeyPatch) -> None:
     pictures = _pictures()
-    monkeypatch.setattr(imageio.os, "sched_getaffinity", lambda pid: {0}, raising=False)
+    monkeypatch.setattr(machine, "usable_cores", lambda: 1)
     assert png_bytes_many(pictures) == {n: png_bytes(p) for n, p in pictures.items()}
     one = {"only.png": pictures["texture.png"]}
     assert png_bytes_many(one) == {"only.png": png_bytes(one["only.png"])}
     assert png_bytes_many({}) == {}
+
+
+def test_usable_cores_counts_this_process_cores() -> None:
+    import os
+
+    n = machine.usable_cores()
+    assert n >= 1
+    if hasattr(os, "sched_getaffinity"):
+        assert n == len(os.sched_getaffinity(0))

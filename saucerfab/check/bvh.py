@@ -15,7 +15,6 @@ the tests.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -28,11 +27,9 @@ FAST_FROM_TRIANGLES = 200_000
 
 def query_workers() -> int:
     """Threads for the numpy-heavy queries (rays, pair tests): the cores this process may use, at most 4."""
-    try:
-        n = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        n = os.cpu_count() or 1
-    return max(1, min(4, n))
+    from saucerfab.machine import usable_cores
+
+    return min(4, usable_cores())
 
 
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -282,8 +282,8 @@ def export_design(
     timings["bake"] = bake_stats["bake_s"]
     # the atlas and the reference pictures that travel with the print, encoded side by side
     refs = {reference_name(v): img for v, img in sorted(dsg.references.items())}
-    encoded = png_bytes_many({"": page, **refs}, ATLAS_PNG_LEVEL)
-    png = encoded.pop("")
+    encoded = png_bytes_many({"(atlas)": page, **refs}, ATLAS_PNG_LEVEL)
+    png = encoded.pop("(atlas)")  # the rest, the references' files, go into `extra` below
     t = step("encode", t)
 
     mesh = TexturedMesh(
