@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-ORDER = ["bench_mirror.py", "bench_render.py", "bench_relief.py", "bench_design.py", "bench_first_look.py", "bench_sparse_stage.py", "bench_export.py", "bench_check.py", "bench_check_hostile.py", "bench_conformance.py", "bench_batch.py", "bench_verify.py"]
+ORDER = ["bench_mirror.py", "bench_render.py", "bench_render_floor.py", "bench_relief.py", "bench_design.py", "bench_first_look.py", "bench_sparse_stage.py", "bench_export.py", "bench_check.py", "bench_check_hostile.py", "bench_conformance.py", "bench_batch.py", "bench_verify.py"]
 
 
 def main() -> int:
