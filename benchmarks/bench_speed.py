@@ -26,7 +26,11 @@ default on the mean over the K + 1 starts of each: a change of method read
 through the path noise rather than from one start of each.
 
 Times are wall-clock on a shared machine: the ratio within a pair is the
-figure; the load average is printed at each step.
+figure; the load average is printed at each step. Beside each wall time,
+the CPU seconds the design process used (user + system, from the children's
+rusage): a slow spell of the machine stretches the wall time of the same
+iterations by up to half (session 20) and the CPU time less, so the CPU
+ratio tells a slow spell from more work.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import shlex
 import subprocess
 import sys
@@ -82,14 +87,26 @@ def design(code: Path, pair: str, out: Path, extra: list[str], noise_seed: int |
              else [str(ROOT / "benchmarks" / "perturbed_design.py"), str(noise_seed)])
     cmd = [sys.executable, *entry, "design", "--direct", str(SAMPLES / direct), "--reflected",
            str(SAMPLES / reflected), "--out", str(out), "--quiet", *extra]
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _children_cpu()
     done = subprocess.run(cmd, cwd=code, env=_env(code), capture_output=True, text=True)
     if done.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed (exit {done.returncode}):\n{done.stderr[-3000:]}")
     seconds = time.perf_counter() - t0
+    cpu_s = _children_cpu() - c0
     meta = json.loads((out / "design.json").read_text())
     stages = [(s["name"], s["iterations"], s.get("seconds", float("nan"))) for s in meta["metrics"]["stages"]]
-    return {"seconds": seconds, "stages": stages, "total_s": meta["metrics"].get("total_s")}
+    return {"seconds": seconds, "cpu_s": cpu_s, "stages": stages, "total_s": meta["metrics"].get("total_s")}
+
+
+def _children_cpu() -> float:
+    """User + system CPU seconds of this process's finished children.
+
+    A second reading of a design's cost beside its wall time: a slow spell of a
+    shared machine (the same iterations taking up to 50 % longer) stretches the
+    wall time more than the CPU time the design itself used.
+    """
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
 
 def verified(design_dir: Path, print_dir: Path) -> dict[str, float]:
@@ -226,22 +243,27 @@ def main() -> int:
                 d["load"] = _load()
                 d["psnr"] = verified(out / "design", out / "print")
                 row[label] = d
-                print(f"{pair} {label}: {d['seconds']:.1f} s (load {d['load']}), stages "
+                print(f"{pair} {label}: {d['seconds']:.1f} s, CPU {d['cpu_s']:.1f} s (load {d['load']}), stages "
                       + ", ".join(f"{n} {i} it {s:.1f} s" for n, i, s in d["stages"]), flush=True)
             rows.append(row)
     print()
     for label in ([] if args.no_new else ["new"]) + [a[0] for a in extra_arms]:
         print(f"\n### {label} against old")
-        print(f"| pair | old s | {label} s | {label} / old | old stages (it) | {label} stages (it) |")
-        print("|---|---:|---:|---:|---|---|")
+        print(f"| pair | old s | {label} s | {label} / old | CPU s old / {label} | CPU {label} / old "
+              f"| old stages (it) | {label} stages (it) |")
+        print("|---|---:|---:|---:|---:|---:|---|---|")
         for r in rows:
             o, n = r["old"], r[label]
             print(f"| {r['pair']} | {o['seconds']:.1f} | {n['seconds']:.1f} | {n['seconds'] / o['seconds']:.2f} | "
+                  f"{o['cpu_s']:.1f} / {n['cpu_s']:.1f} | {n['cpu_s'] / o['cpu_s']:.2f} | "
                   + " / ".join(str(i) for _, i, _ in o["stages"]) + " | "
                   + " / ".join(str(i) for _, i, _ in n["stages"]) + " |")
         tot_o = sum(r["old"]["seconds"] for r in rows)
         tot_n = sum(r[label]["seconds"] for r in rows)
-        print(f"| all | {tot_o:.1f} | {tot_n:.1f} | {tot_n / tot_o:.2f} | | |")
+        cpu_o = sum(r["old"]["cpu_s"] for r in rows)
+        cpu_n = sum(r[label]["cpu_s"] for r in rows)
+        print(f"| all | {tot_o:.1f} | {tot_n:.1f} | {tot_n / tot_o:.2f} | {cpu_o:.1f} / {cpu_n:.1f} "
+              f"| {cpu_n / cpu_o:.2f} | | |")
         print()
         print(f"| pair | view | old dB: design / left / right eye | {label} dB | change dB |")
         print("|---|---|---|---|---|")
