@@ -28,9 +28,10 @@ through the path noise rather than from one start of each.
 Times are wall-clock on a shared machine: the ratio within a pair is the
 figure; the load average is printed at each step. Beside each wall time,
 the CPU seconds the design process used (user + system, from the children's
-rusage): a slow spell of the machine stretches the wall time of the same
-iterations by up to half (session 20) and the CPU time less, so the CPU
-ratio tells a slow spell from more work.
+rusage): the same design's CPU seconds stay put between runs while a slow
+spell of the machine stretches its wall time by up to half (session 20), so
+they tell a slow spell from more work. The CPU ratio of old and new is not
+the wall-time ratio: the new default keeps both cores busier.
 """
 
 from __future__ import annotations
