@@ -202,6 +202,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=15, help="timed calls of each part")
     ap.add_argument("--sigmas", type=float, nargs="+", default=[1e-5, 1e-7])
     args = ap.parse_args(argv)
+    if args.repeat < 1:
+        ap.error(f"--repeat must be at least 1 (got {args.repeat}): each part's median needs a timed call")
+    if any(not s > 0 for s in args.sigmas):
+        ap.error(f"--sigmas must be positive (got {args.sigmas}): sigma is the coverage sigmoid's width")
 
     heights, views, colors, _ = bench_render.build_problem()
     rng = np.random.default_rng(0)
