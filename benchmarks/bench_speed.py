@@ -28,10 +28,10 @@ through the path noise rather than from one start of each.
 Times are wall-clock on a shared machine: the ratio within a pair is the
 figure; the load average is printed at each step. Beside each wall time,
 the CPU seconds the design process used (user + system, from the children's
-rusage): the same design's CPU seconds stay put between runs while a slow
-spell of the machine stretches its wall time by up to half (session 20), so
-they tell a slow spell from more work. The CPU ratio of old and new is not
-the wall-time ratio: the new default keeps both cores busier.
+rusage): on this shared machine the wall time of the same iterations moved
+by up to half between runs (session 20), so compare a design's CPU seconds
+between runs to tell a slow spell from more work. The CPU ratio of old and
+new is not the wall-time ratio: the new default keeps both cores busier.
 """
 
 from __future__ import annotations
@@ -102,9 +102,7 @@ def design(code: Path, pair: str, out: Path, extra: list[str], noise_seed: int |
 def _children_cpu() -> float:
     """User + system CPU seconds of this process's finished children.
 
-    A second reading of a design's cost beside its wall time: a slow spell of a
-    shared machine (the same iterations taking up to 50 % longer) stretches the
-    wall time more than the CPU time the design itself used.
+    A second reading of a design's cost beside its wall time (see the module's docstring).
     """
     r = resource.getrusage(resource.RUSAGE_CHILDREN)
     return r.ru_utime + r.ru_stime
