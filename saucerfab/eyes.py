@@ -9,8 +9,9 @@ the frame of the design eye given to :func:`eye_positions`: the file frame of
 at the saucer; world z is up), "up" along its image up axis, so an eye box is
 a rectangle facing the saucer, centred on the design eye.
 
-``point`` (the design's name) and ``design`` (verify's) are the same mode:
-the design eye alone.
+One word for each mode in every command: ``design`` (the design eye alone),
+``both``, ``box:W,H[,N]``. ``point``, the name ``saucerfab design`` used for
+``design`` before, is still read (design folders and scripts of that time).
 """
 
 from __future__ import annotations
@@ -22,10 +23,12 @@ import numpy as np
 
 from saucerfab.errors import ConfigError
 
-#: eye modes of ``--eyes`` (``point`` is accepted for ``design``)
+#: eye modes of ``--eyes`` (``point``, an older name of ``design``, is still read)
 EYE_MODES = ("design", "both", "box")
-#: the forms ``saucerfab design --eyes`` takes (its default: DesignRequest.eyes)
-DESIGN_EYES_USAGE = "point|both|box:W,H[,N]"
+#: the forms ``--eyes`` takes, in ``saucerfab design`` and ``saucerfab verify`` alike
+EYES_USAGE = "design|both|box:W,H[,N]"
+#: the older name of ``design`` (``saucerfab design --eyes point``), still read
+OLD_DESIGN_EYE_NAME = "point"
 #: a viewer's interpupillary distance, mm (adult mean, about 63-64 mm)
 DEFAULT_IPD_MM = 64.0
 #: positions per side of an eye box
@@ -66,11 +69,11 @@ class Eye:
 
 
 def parse_eyes(text: str, ipd_mm: float = DEFAULT_IPD_MM) -> EyeSpec:
-    """``design`` (or ``point``), ``both`` or ``box:W,H[,N]`` (millimetres; N positions per side)."""
+    """``design`` (or its older name ``point``), ``both`` or ``box:W,H[,N]`` (millimetres; N positions per side)."""
     if not (isinstance(ipd_mm, (int, float)) and math.isfinite(ipd_mm) and 0 < ipd_mm <= 200):
         raise ConfigError(f"--ipd-mm must be a distance in (0, 200] mm, got {ipd_mm!r}")
     t = str(text).strip().lower()
-    if t == "point":
+    if t == OLD_DESIGN_EYE_NAME:
         t = "design"
     if t in ("design", "both"):
         return EyeSpec(t, float(ipd_mm))
@@ -88,7 +91,7 @@ def parse_eyes(text: str, ipd_mm: float = DEFAULT_IPD_MM) -> EyeSpec:
         if nums[0] > 1000 or nums[1] > 1000:
             raise ConfigError(f"--eyes {text!r}: an eye box wider than 1000 mm is not a viewing region")
         return EyeSpec("box", float(ipd_mm), (nums[0], nums[1]), steps)
-    raise ConfigError(f"--eyes must be one of point (or design), both, box:W,H[,N]; got {text!r}")
+    raise ConfigError(f"--eyes must be one of {EYES_USAGE.replace('|', ', ')}; got {text!r}")
 
 
 def view_axes(eye: tuple[float, float, float], target: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:

@@ -36,7 +36,8 @@ QUICK_SPP = 4
 #: atlas edge of the trial export a design's quick verify renders (:func:`verify_design`). At
 #: QUICK_RES a view's frame spans 128 px, so 1024 texels across the saucer's top are several per
 #: pixel; the printer's own atlas (4096 for a J55 at 600 dpi) costs a 16x larger bake and texture
-#: load for the same picture (heart-star: 5.2 -> 2.1 s a quick verify, benchmarks/RESULTS.md).
+#: load for the same picture (heart-star: 5.2 -> 2.1 s a quick verify,
+#: benchmarks/results/HISTORY.md, "The quick verify of `saucerfab design`").
 #: An export's own verify (:func:`finish_print`) always renders the atlas it wrote.
 QUICK_TEXTURE_PX = 1024
 
@@ -183,15 +184,18 @@ def finish_print(
         except ImportError:
             limits = None  # no checker installed: check_mesh_file says so per file
         with meshes_to_check(result.files) as meshes:
-            # reported by the file written: a zipped OBJ is named by its zip
-            done.checks += [(m.written, check_mesh_file(m.path, profile, limits)) for m in meshes]
+            # reported by the file written: a zipped OBJ is named by its zip. A file outside the print
+            # set (a format the printer does not take, written on request into a subfolder) is checked
+            # without the printer: it is not for that printer.
+            done.checks += [(m.written, check_mesh_file(m.path, profile if m.written.parent == folder else None,
+                                                        limits)) for m in meshes]
         docs = []
         for path, rep in done.checks:
             if rep is None:
                 continue
             d = rep.to_dict()
             d.pop("elapsed_s", None)  # the folder stays byte-identical run to run
-            d["path"] = path.name
+            d["path"] = path.relative_to(folder).as_posix() if path.is_relative_to(folder) else path.name
             docs.append(d)
         write_text_atomic(folder / "check.json", json.dumps({"schema": "saucerfab.check/1", "files": docs},
                                                             indent=2, sort_keys=True) + "\n")

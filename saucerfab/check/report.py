@@ -472,6 +472,46 @@ def _file_line(r: Report, cells: Sequence[str], verdict_style: str) -> Any:
     return Text.assemble(*parts)
 
 
+def _where(f: Finding) -> str:
+    """``  at (x, y, z) mm`` for a finding with a point its message does not already name, else ``""``."""
+    if not (f.where and f.where.get("point_mm") is not None):
+        return ""
+    x, y, z = f.where["point_mm"]
+    point = f"({x:.2f}, {y:.2f}, {z:.2f}) mm"
+    return "" if point in f.message else f"  at {point}"  # most messages already name the point
+
+
+def _shown_findings(r: Report) -> list[Finding]:
+    """The findings a person is shown: errors and warnings (and the info ones of an unreadable file)."""
+    return [f for f in r.findings if f.severity != "info" or r.verdict == "unreadable"]
+
+
+def render_plain(reports: Sequence[Report], out: Any = None) -> None:
+    """The summary for a pipe or a file: one line per file, then one line per finding; no table, no wrapping.
+
+    Each line starts with the file's path, so ``grep`` finds a file's lines
+    and ``cut -d: -f1`` its name::
+
+        out/saucer.3mf: printable  3mf  12,345 triangles  100x195x12 mm  min wall 1.2 mm  E/W 0/0
+        out/plate.stl: not printable  stl  ...
+        out/plate.stl: error thin_walls: ...
+    """
+    import sys
+
+    out = out if out is not None else sys.stdout
+    for r in reports:
+        _, fmt, verdict, tris, size, vol, wall, ew = _table_cells(r)
+        parts = [fmt]
+        for text, shown in ((f"{tris} triangles", tris), (f"{size} mm", size), (f"{vol} cm3", vol),
+                            (f"min wall {wall} mm", wall)):
+            if shown != "-":
+                parts.append(text)
+        print(f"{r.path}: {verdict}  {'  '.join(parts)}  E/W {ew}", file=out)
+        for f in _shown_findings(r):
+            message = " ".join(f"{f.message}{_where(f)}".split())  # one line, whatever the message holds
+            print(f"{r.path}: {f.severity} {f.code}: {message}", file=out)
+
+
 def render_table(reports: Sequence[Report], *, console: Any = None) -> None:
     """Print the human summary: one row per file, then each file's findings.
 
@@ -508,15 +548,9 @@ def render_table(reports: Sequence[Report], *, console: Any = None) -> None:
         con.print(table)
     sev_style = {"error": "red", "warning": "yellow", "info": "dim"}
     for r in reports:
-        shown = [f for f in r.findings if f.severity != "info" or r.verdict == "unreadable"]
+        shown = _shown_findings(r)
         if not shown:
             continue
         con.print(Text.assemble((r.path, "bold"), "  ", r.verdict), soft_wrap=True)  # the path whole
         for f in shown:
-            at = ""
-            if f.where and f.where.get("point_mm") is not None:
-                x, y, z = f.where["point_mm"]
-                point = f"({x:.2f}, {y:.2f}, {z:.2f}) mm"
-                # most messages already name the point; do not say it twice
-                at = "" if point in f.message else f"  at {point}"
-            con.print(f"  [{sev_style[f.severity]}]{f.severity:7s}[/] {f.code}: {escape(f.message)}{escape(at)}")
+            con.print(f"  [{sev_style[f.severity]}]{f.severity:7s}[/] {f.code}: {escape(f.message)}{escape(_where(f))}")

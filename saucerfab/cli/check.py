@@ -1,8 +1,13 @@
 """``saucerfab check FILE...``: will these meshes print? For people, CI systems and bureaus.
 
 Exit code: 0 all printable, 1 some not printable, 2 some unreadable or not a
-mesh (the largest over the files). A table (or ``--json``, schema
-``saucerfab.check/1``; ``--junit FILE`` as well) and a summary line.
+mesh (the largest over the files). A FILE may be a folder (every mesh file
+directly in it: a print folder's print set) or a glob pattern (``'out/*.3mf'``,
+for shells that do not expand it). On a terminal, a table; into a pipe or a
+file, one line per file and one per finding, each starting with the file's
+path (greppable); ``--json`` the schema ``saucerfab.check/1`` (``-o FILE``
+and ``--junit FILE`` write it and JUnit XML to files, replacing an existing
+file only with ``--force``); then a summary line (the only line with ``-q``).
 This module imports nothing heavy at import time: ``saucerfab --help``
 loads it, and ``saucerfab check`` must start fast without torch.
 """
@@ -19,10 +24,15 @@ HELP = f"check mesh files ({labels(READERS.values())}) for printability; exit 0/
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("files", nargs="*", metavar="FILE", help="mesh files to check")
+    p.add_argument("files", nargs="*", metavar="FILE",
+                   help="mesh files to check; a folder checks every mesh file directly in it, a quoted glob "
+                        "pattern ('out/*.3mf') the files it matches")
     p.add_argument("--printer", metavar="NAME", help="check against a printer profile (key or .toml path)")
     p.add_argument("--json", action="store_true", help="print the saucerfab.check/1 JSON document instead of a table")
     p.add_argument("--junit", metavar="FILE", help="also write a JUnit XML report to FILE")
+    p.add_argument("-o", "--out", metavar="FILE", help="also write the saucerfab.check/1 JSON document to FILE")
+    p.add_argument("--force", action="store_true", help="replace an existing --out or --junit file")
+    p.add_argument("-q", "--quiet", action="store_true", help="print only the summary line")
     p.add_argument("--strict", action="store_true", help="warnings fail too (exit 1)")
     p.add_argument("--max-triangles", type=int, metavar="N",
                    help="check files of up to N triangles (default 500,000; larger files are refused as too large "
@@ -54,12 +64,65 @@ def _keep_freed_memory() -> None:
         pass
 
 
+def expand_files(given: list[str]) -> list[str]:
+    """The mesh files ``given`` names: files as they are, a folder's mesh files, a glob's matches; in order.
+
+    A folder gives every file directly in it whose suffix a checker reader
+    takes (:data:`saucerfab.formats.SUFFIXES`) or ``.zip`` (an OBJ zipped with
+    its side files), sorted by name; not its subfolders (an export's print set
+    is its top level). A name that does not exist and holds ``*``, ``?`` or
+    ``[`` is a glob pattern (sorted matches). Anything else is passed on as
+    it is, so a missing file is reported as unreadable like any other.
+
+    Raises:
+        ConfigError: a folder with no mesh file, or a pattern that matches nothing.
+    """
+    import glob
+    from pathlib import Path
+
+    from saucerfab.errors import ConfigError
+    from saucerfab.formats import SUFFIXES
+
+    out: list[str] = []
+    for name in given:
+        path = Path(name)
+        if path.is_dir():
+            found = sorted(str(p) for p in path.iterdir()
+                           if p.is_file() and (p.suffix.lower() in SUFFIXES or p.suffix.lower() == ".zip"))
+            if not found:
+                raise ConfigError(f"folder {name!r} holds no mesh file ({', '.join(sorted(SUFFIXES))}, .zip); "
+                                  "give the folder an export wrote, or the files themselves")
+            out += found
+        elif not path.exists() and glob.has_magic(name):
+            found = sorted(glob.glob(name))
+            if not found:
+                raise ConfigError(f"no file matches {name!r}; check the pattern (quote it so the shell leaves it)")
+            out += found
+        else:
+            out.append(name)
+    return list(dict.fromkeys(out))  # a file named twice (a folder and a glob) is checked once
+
+
+def on_terminal() -> bool:
+    """Whether stdout is a terminal (a person reads the table) rather than a pipe or a file (a program does)."""
+    try:
+        return sys.stdout.isatty()
+    except (AttributeError, ValueError):  # closed or replaced stdout
+        return False
+
+
 def run(args: argparse.Namespace) -> int:
     from saucerfab.check import JSON_SCHEMA, Limits, check_many, reports_to_json, reports_to_junit, summary_line
+    from saucerfab.cli.outputs import refuse_existing
     from saucerfab.errors import ConfigError
+    from saucerfab.fileio import write_text_atomic
 
     if schema_asked(args, JSON_SCHEMA, args.files, "give one or more mesh files to check (saucerfab check FILE...)"):
         return 0
+    for option, path in (("--out", args.out), ("--junit", args.junit)):
+        if path:
+            refuse_existing(option, path, args.force)
+    files = expand_files(args.files)
     changes: dict[str, object] = {}
     if args.max_triangles is not None:
         if args.max_triangles <= 0:
@@ -74,23 +137,30 @@ def run(args: argparse.Namespace) -> int:
         limits = limits.for_triangles(args.max_triangles)
     limits = limits.with_(**changes)
     _keep_freed_memory()
-    reports = check_many(args.files, printer=args.printer, limits=limits, strict=args.strict)
-    if args.junit:
-        from saucerfab.fileio import write_text_atomic
-
+    reports = check_many(files, printer=args.printer, limits=limits, strict=args.strict)
+    for option, path, text in (("--junit", args.junit, reports_to_junit), ("--out", args.out, reports_to_json)):
+        if not path:
+            continue
         try:
-            write_text_atomic(args.junit, reports_to_junit(reports))
+            write_text_atomic(path, text(reports) + ("\n" if option == "--out" else ""))
         except OSError as exc:
-            raise ConfigError(f"cannot write --junit {args.junit!r}: {exc.strerror or exc}") from None
+            raise ConfigError(f"cannot write {option} {path!r}: {exc.strerror or exc}") from None
     code = max(r.exit_code for r in reports)
     try:
         if args.json:
             sys.stdout.write(reports_to_json(reports) + "\n")
             print(summary_line(reports), file=sys.stderr)
-        else:
+        elif args.quiet:
+            print(summary_line(reports))
+        elif on_terminal():
             from saucerfab.check.report import render_table
 
             render_table(reports)
+            print(summary_line(reports))
+        else:  # a pipe or a file: greppable lines, no table
+            from saucerfab.check.report import render_plain
+
+            render_plain(reports)
             print(summary_line(reports))
         sys.stdout.flush()
     except BrokenPipeError:

@@ -86,7 +86,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         f"subject (the black-white enhancement; {STAGE_CAPS['auto'][0]} iterations a stage) and runs it for "
         f"photographs ({STAGE_CAPS['auto'][1]} a stage), which gain from it where the others do not; fast always "
         f"skips it; paper runs Algorithm 1's three stages as written, {STAGE_CAPS['paper'][0]} iterations each at "
-        "most (measured in benchmarks/RESULTS.md). The ablations always run as the paper wrote them "
+        "most (measured in benchmarks/RESULTS.md, Design speed against its anchors). The ablations always run "
+        "as the paper wrote them "
         f"(default {default('method')})",
     )
     p.add_argument(
@@ -138,7 +139,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--eyes",
         metavar="EYES",
-        help="where the design is made to be seen from: point (the design eye alone, the paper's method), both "
+        help="where the design is made to be seen from: design (the design eye alone, the paper's method), both "
         "(the design eye and a viewer's two eyes, --ipd-mm apart) or box:W,H[,N] (an N x N grid of eyes, W x H mm, "
         "around the design eye; N default 3); millimetres at the design's cup size. Each eye adds its own direct "
         "and reflected renders to every iteration (about 2x the time for both). The eyes 'saucerfab verify "
@@ -234,17 +235,17 @@ def run(args: argparse.Namespace) -> int:
               + (f" (or until {par['stall_window_used']} renders gain under {SolverSettings.tol * 100:g} % each)"
                  if par.get("stall_window_used") else ""))
     for st in m.get("stages", []):
+        # --no-times leaves the times out of design.json: then no time column (not "nan s")
+        secs = f"{st['seconds']:6.1f} s  " if "seconds" in st else ""
         print(
-            f"  {st['name']:22s} {st['iterations']:4d} it  {st.get('seconds', float('nan')):6.1f} s  "
+            f"  {st['name']:22s} {st['iterations']:4d} it  {secs}"
             f"E_visual {st['E_visual']:10.1f}  E_deform {st['E_deform']:.4f}  "
             f"conflict {100 * st['conflict_fraction']:.1f}%"
         )
-    total = f"total {m.get('total_s', float('nan')):.1f} s"
+    total = f"total {m['total_s']:.1f} s" if "total_s" in m else "times not recorded (--no-times)"
     if "resumed_after_stage" in m:
-        total += (
-            f" over all runs (this run {m.get('this_run_s', float('nan')):.1f} s, "
-            f"resumed after stage {m['resumed_after_stage']})"
-        )
+        this_run = f"this run {m['this_run_s']:.1f} s, " if "this_run_s" in m else ""
+        total += f"{' over all runs' if 'total_s' in m else ''} ({this_run}resumed after stage {m['resumed_after_stage']})"
     print(
         f"  final E_visual {m.get('E_visual_final', float('nan')):.1f} against the original pictures "
         "(the stages' E_visual is against their blur-matched, often enhanced, targets), max |h - z| "

@@ -1,8 +1,13 @@
 """``saucerfab export``: a design folder -> print-ready files for a printer.
 
-    saucerfab export DESIGN_DIR --printer j55 --cup-diameter-mm 80 --formats 3mf,obj,glb --out DIR
+    saucerfab export DESIGN_DIR --out DIR [--printer j55] [--cup-diameter-mm 80] [--formats 3mf,obj,glb]
 
-Prints progress (stderr), a summary (size, triangles, volume, file sizes,
+The printer and the cup size default to those the design was made for
+(design.json), and the summary says which printer and why. A format the
+printer does not take is refused before anything is written, unless
+``--allow-format``: then it goes into ``DIR/other-formats/``, outside the
+print set. An ``--out`` that holds an earlier export is replaced only with
+``--force`` (the rule of every command that writes). Prints progress (stderr), a summary (size, triangles, volume, file sizes,
 warnings) and the validity check of each written mesh file
 (``saucerfab.check.check_mesh``). Exit code: 0 when written and every check
 passes, the worst check's exit code otherwise (1 not printable, 2
@@ -46,10 +51,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     # FabOptions settings default to None ("not given"): run passes on only those given, so
     # each default is FabOptions' own (help texts read it from there)
     p.add_argument("design", help="the design folder (from 'saucerfab design')")
-    p.add_argument("-o", "--out", required=True, help="output folder (new, empty, or a previous export of this design)")
-    p.add_argument("--force", action="store_true", help="replace an earlier export of another design in --out")
-    p.add_argument("--printer", default=DEFAULT_PRINTER,
-                   help=f"printer profile key or .toml path (default {DEFAULT_PRINTER}; see 'saucerfab printers')")
+    p.add_argument("-o", "--out", required=True, help="output folder (new or empty; an earlier export needs --force)")
+    p.add_argument("--force", action="store_true", help="replace the earlier export in --out")
+    p.add_argument("--printer", default=None,
+                   help="printer profile key or .toml path (default: the printer the design was made for, else "
+                        f"{DEFAULT_PRINTER}; see 'saucerfab printers')")
     p.add_argument(
         "--cup-diameter-mm",
         type=float,
@@ -60,8 +66,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--formats",
         default=None,
-        help=f"comma-separated: {', '.join(FORMATS)} (default: the printer's preferred format)",
+        help=f"comma-separated: {', '.join(FORMATS)} (default: the printer's preferred format); a format the "
+        "printer does not take is refused unless --allow-format",
     )
+    p.add_argument("--allow-format", action="store_true",
+                   help="write formats the printer does not take anyway, into OUT/other-formats/ (outside the print "
+                        "set, checked without the printer)")
     p.add_argument("--texture-px", dest="texture_px", type=int,
                    help="atlas edge in pixels, a power of two (default: from the printer's dpi)")
     g = p.add_argument_group("solid and cup seat (millimetres)")
@@ -127,11 +137,12 @@ def _design_inputs(folder: Path) -> object:
 
 
 def check_other_export(design: str, out: str, force: bool) -> None:
-    """Refuse, unless ``force``, to replace ``out`` when it holds an export of another design.
+    """Refuse, unless ``force``, to replace ``out`` when it holds an earlier export.
 
-    Re-exporting the same design into its own folder stays allowed: the
-    earlier export's ``export.json`` -> ``design`` -> ``inputs`` equal the
-    design's inputs.
+    One rule for every command that writes a folder (``design`` refuses an
+    existing design the same way): an earlier result is replaced only with
+    ``--force``. The message says whose export it is (this design's, or
+    another's, named by its input files).
     """
     from saucerfab.errors import ConfigError
 
@@ -147,7 +158,10 @@ def check_other_export(design: str, out: str, force: bool) -> None:
         theirs = None
     # export.json was written with json.dumps(default=str): compare in that form
     if theirs is not None and json.loads(json.dumps(ours, default=str)) == theirs:
-        return
+        raise ConfigError(
+            f"--out {str(out)!r} holds an earlier export of this design; add --force to replace it, "
+            "or give another --out"
+        )
     if isinstance(theirs, dict):
         files = ", ".join(f"{k} {v.get('file')}" for k, v in sorted(theirs.items()) if isinstance(v, dict) and v.get("file"))
         what = f"an export of another design ({files or 'other inputs'})"
@@ -174,11 +188,9 @@ def run(args: argparse.Namespace) -> int:
 def _run_locked(args: argparse.Namespace, given: dict[str, Any]) -> int:
     """The export, check, verify and summary, with ``--out`` held by :func:`export_lock`."""
     from saucerfab.fabricate.pipeline import export_design
-    from saucerfab.profiles import load_profile
 
     check_other_export(args.design, args.out, args.force)
     options = FabOptions(**given)
-    profile = load_profile(args.printer)
     formats = [f for f in args.formats.split(",") if f.strip()] if args.formats is not None else None
 
     def progress(step: str, fraction: float) -> None:
@@ -188,12 +200,14 @@ def _run_locked(args: argparse.Namespace, given: dict[str, Any]) -> int:
     result = export_design(
         args.design,
         args.out,
-        printer=profile,
+        printer=args.printer,
         cup_diameter_mm=args.cup_diameter_mm,
         formats=formats,
         options=options,
         progress=progress,
+        allow_other_formats=args.allow_format,
     )
+    profile = result.profile
 
     from saucerfab.finish import finish_print
 
@@ -224,7 +238,10 @@ def _run_locked(args: argparse.Namespace, given: dict[str, Any]) -> int:
         return exit_code
 
     x, y, z = result.bbox_mm
-    print(f"exported {args.design} -> {result.out} for {profile.name} ({profile.key})")
+    from saucerfab.fabricate.pipeline import PRINTER_SOURCES
+
+    print(f"exported {args.design} -> {result.out} for {profile.name} ({profile.key}; "
+          f"{PRINTER_SOURCES[result.printer_source]})")
     print(f"  part     {x:.1f} x {y:.1f} x {z:.1f} mm; cup {result.cup_diameter_mm:g} mm ({result.mm_per_unit:g} mm per model unit)")
     print(f"  solid    {result.triangles:,} triangles, {result.vertices:,} vertices, volume {result.volume_mm3 / 1000:.2f} cm3")
     print(

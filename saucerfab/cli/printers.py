@@ -9,6 +9,7 @@ HELP = "list printer profiles (build volume, minimum wall, dpi, formats)"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print as JSON")
+    p.add_argument("-q", "--quiet", action="store_true", help="print only the keys, one a line")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -20,6 +21,9 @@ def run(args: argparse.Namespace) -> int:
     profiles = list_profiles()
     if args.json:
         print(json.dumps({k: asdict(v) for k, v in profiles.items()}, indent=2))
+        return 0
+    if args.quiet:
+        print("\n".join(profiles))
         return 0
     print(f"{'key':16s} {'name':28s} {'build volume mm':20s} {'wall':>5s} {'dpi':>5s}  formats (preferred first)")
     for k, p in profiles.items():

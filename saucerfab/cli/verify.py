@@ -3,8 +3,10 @@
     saucerfab verify PRINT_DIR [--eyes design|both|box:W,H[,N]] [--res N] [--min-psnr DB] [--json]
 
 Writes the pictures (ray-traced view, reference, difference heat map) and
-``verify.json`` into ``PRINT_DIR/verify/`` (or ``--out DIR``), replacing an
-earlier verify there as a whole. Exit code: 0 every view passed, 1 some view
+``verify.json`` into ``PRINT_DIR/verify/``, the print folder's own (an
+earlier verify there is replaced as a whole), or into ``--out DIR`` (an
+earlier verify there is replaced only with ``--force``, the rule of every
+command that writes). Exit code: 0 every view passed, 1 some view
 is under ``--min-psnr`` or ``--min-coverage``, 2 the folder or its files
 cannot be read (nothing is written then).
 """
@@ -30,7 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("folder", nargs="?", metavar="PRINT_DIR", help="a folder written by 'saucerfab export'")
     p.add_argument("--eyes", default="both", metavar="MODE",
-                   help="design (the design point), both (it and a viewer's two eyes, the default) or "
+                   help="design (the design eye alone), both (it and a viewer's two eyes, the default) or "
                         "box:W,H[,N] (it and an N x N grid over W x H mm facing the saucer)")
     p.add_argument("--ipd-mm", type=float, default=DEFAULT_IPD_MM,
                    help=f"distance between the viewer's eyes for --eyes both (default {DEFAULT_IPD_MM:g} mm)")
@@ -43,6 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--primary-only", action="store_true",
                    help="render only the first of OBJ, 3MF, GLB (the others are rendered from the design eye by default)")
     p.add_argument("-o", "--out", metavar="DIR", help="where to write the pictures and verify.json (default PRINT_DIR/verify)")
+    p.add_argument("--force", action="store_true", help="replace an earlier verify in --out")
     p.add_argument("--json", action="store_true", help="print the saucerfab.verify/2 JSON document on stdout")
     add_schema_flag(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
@@ -103,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
         raise VerifyInputError(f"{folder} is not a folder; give the folder 'saucerfab export --out' wrote")
     if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / "verify.json").is_file())):
         raise ConfigError(f"--out {str(out)!r} exists and is not an earlier verify folder; give a new or empty folder")
+    if args.out and (out / "verify.json").is_file() and not args.force:
+        raise ConfigError(f"--out {str(out)!r} holds an earlier verify; add --force to replace it, or give another --out")
     with atomic_dir(out) as tmp:
         result = verify_print(
             folder, eyes=eyes, res=args.res, spp=args.spp, min_psnr_db=args.min_psnr,

@@ -51,7 +51,7 @@ class ExportResult:
     Attributes:
         out: the output folder.
         printer: profile key.
-        formats: formats written, in order.
+        formats: formats written, in order (the print set's, then :attr:`other_formats`).
         files: format -> paths of its files (e.g. ``obj``: .obj, .mtl, .png).
         scene_json: path of ``scene.json``.
         summary_json: path of ``export.json``.
@@ -66,6 +66,12 @@ class ExportResult:
         unseen_fraction: share of the top's texels no viewer sees (inpainted).
         warnings: thin walls/features (under ``warn``), seat notes.
         timings: step -> seconds (not written to any file).
+        printer_source: where the printer came from: ``given`` (the caller named it),
+            ``design`` (the printer the design was made for) or ``default``
+            (the design records none: :data:`~saucerfab.profiles.DEFAULT_PRINTER`).
+        other_formats: formats the printer does not take, written on request into
+            :data:`~saucerfab.fabricate.registry.OTHER_FORMATS_DIR` (outside the print set).
+        profile: the printer profile exported for (not in :meth:`to_dict`).
     """
 
     out: Path
@@ -85,13 +91,18 @@ class ExportResult:
     unseen_fraction: float = 0.0
     warnings: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    printer_source: str = "given"
+    other_formats: list[str] = field(default_factory=list)
+    profile: PrinterProfile | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (JSON-ready), paths as strings."""
         return {
             "out": str(self.out),
             "printer": self.printer,
+            "printer_source": self.printer_source,
             "formats": list(self.formats),
+            "other_formats": list(self.other_formats),
             "files": {k: [str(p) for p in v] for k, v in self.files.items()},
             "scene_json": str(self.scene_json),
             "summary_json": str(self.summary_json),
@@ -169,6 +180,51 @@ def _resolve_design(design: Design | str | os.PathLike[str]) -> Design:
     return load_design(path)
 
 
+#: what :attr:`ExportResult.printer_source` says, in words
+PRINTER_SOURCES = {
+    "given": "as given",
+    "design": "the printer the design was made for",
+    "default": "the default printer: the design records none",
+}
+
+
+def design_printer(design: Design) -> str | None:
+    """The printer a design was made for, as ``saucerfab design --printer`` was given (key or .toml), or None.
+
+    Read from design.json's ``parameters.printer``, else the key its
+    ``parameters.print_target`` records; None for a design that records
+    neither (a synthetic design, or one older than the print target).
+    """
+    made = design.parameters.get("printer")
+    if not isinstance(made, str) or not made:
+        made = (design.parameters.get("print_target") or {}).get("printer")
+    return made if isinstance(made, str) and made else None
+
+
+def export_printer(design: Design, printer: str | PrinterProfile | None) -> tuple[PrinterProfile, str]:
+    """The profile to export ``design`` for, and where it came from (a key of :data:`PRINTER_SOURCES`).
+
+    ``printer`` when given; else the printer the design was made for
+    (:func:`design_printer`); else :data:`~saucerfab.profiles.DEFAULT_PRINTER`.
+
+    Raises:
+        ConfigError: an unknown printer, or the design's own printer can no
+            longer be loaded (a profile .toml moved away).
+    """
+    if printer is not None:
+        return (printer if isinstance(printer, PrinterProfile) else load_profile(printer)), "given"
+    made = design_printer(design)
+    if made is None:
+        return load_profile(DEFAULT_PRINTER), "default"
+    try:
+        return load_profile(made), "design"
+    except ConfigError as exc:
+        raise ConfigError(
+            f"the design was made for printer {made!r}, which cannot be loaded here ({exc}); "
+            "give --printer with a profile name or .toml path"
+        ) from None
+
+
 def _resolve_cup(design: Design, cup_diameter_mm: float | None) -> Design:
     if cup_diameter_mm is None:
         return design
@@ -184,24 +240,28 @@ def export_design(
     design: Design | str | os.PathLike[str],
     out: str | os.PathLike[str],
     *,
-    printer: str | PrinterProfile = DEFAULT_PRINTER,
+    printer: str | PrinterProfile | None = None,
     cup_diameter_mm: float | None = None,
     formats: Sequence[str] | None = None,
     options: FabOptions | None = None,
     progress: Progress | None = None,
+    allow_other_formats: bool = False,
 ) -> ExportResult:
     """Export a design as print-ready files for ``printer``.
 
     Args:
         design: a :class:`Design` or a design folder.
         out: output folder (created, or replaced if it is a previous export).
-        printer: profile key (``j55``), path to a profile TOML, or a profile.
+        printer: profile key (``j55``), path to a profile TOML, or a profile; None:
+            the printer the design was made for (:func:`export_printer`).
         cup_diameter_mm: the real cup's width (circle: diameter; ellipse: 2a;
-            prism: 2 x circumradius), mm; None keeps the scene's.
+            prism: 2 x circumradius), mm; None keeps the design's.
         formats: formats to write (keys or aliases of
             :data:`saucerfab.formats.WRITERS`); None: the profile's preferred format.
         options: solid, seat and texture settings.
         progress: called with (step name, overall fraction in [0, 1]).
+        allow_other_formats: write formats the printer does not take, into
+            :data:`~saucerfab.fabricate.registry.OTHER_FORMATS_DIR` (refused otherwise).
 
     Returns:
         An :class:`ExportResult`.
@@ -209,9 +269,8 @@ def export_design(
     Raises:
         DesignError: missing or broken design folder.
         ConfigError: bad cup diameter or options, unknown printer.
-        ExportError: unknown format (one the profile does not list is written
-            with a warning), part larger than the
-            build volume, over the printer's triangle or file size limit,
+        ExportError: unknown format, one the printer does not take (without
+            ``allow_other_formats``), part larger than the build volume, over the printer's triangle or file size limit,
             unusable output folder.
         MeshError: the solid cannot be built, or is too thin for a
             ``refuse`` profile.
@@ -232,18 +291,26 @@ def export_design(
 
     t = time.perf_counter()
     opts = options or FabOptions()
-    profile = printer if isinstance(printer, PrinterProfile) else load_profile(printer)
+    loaded = _resolve_design(design)
+    profile, printer_source = export_printer(loaded, printer)
     if isinstance(formats, str):  # "3mf,obj" from a config file or a careless caller
         formats = formats.split(",")
-    # a format the profile does not list is written with a warning (a GLB to share a preview, say)
-    fmts, format_warnings = registry.normalize_formats(
-        [profile.preferred_format] if formats is None else list(formats), profile.accepted_formats, profile.key
+    # one rule: a format the printer does not take is refused, or written outside the print set on request
+    print_fmts, other_fmts = registry.normalize_formats(
+        [profile.preferred_format] if formats is None else list(formats), profile.accepted_formats, profile.name,
+        allow_other=allow_other_formats,
     )
+    fmts = print_fmts + other_fmts
+    format_warnings = [
+        f"{f.upper()} written into {registry.OTHER_FORMATS_DIR}/ at your request (--allow-format): "
+        f"{profile.name} does not take it, so it is not part of the print set"
+        for f in other_fmts
+    ]
     if opts.texture_px is not None and opts.texture_px > profile.max_texture_px:
         raise ExportError(
             f"texture_px {opts.texture_px} exceeds what {profile.name} accepts ({profile.max_texture_px} px)"
         )
-    dsg = _resolve_cup(_resolve_design(design), cup_diameter_mm)
+    dsg = _resolve_cup(loaded, cup_diameter_mm)
     scene = dsg.scene
     t = step("load", t)
 
@@ -299,7 +366,9 @@ def export_design(
     )
     per_format: dict[str, dict[str, bytes]] = {}
     for fmt in fmts:
-        per_format[fmt] = registry.render(mesh, fmt, opts)
+        files = registry.render(mesh, fmt, opts)
+        # a format the printer does not take goes into its own subfolder, with its texture beside it
+        per_format[fmt] = {f"{registry.OTHER_FORMATS_DIR}/{n}": d for n, d in files.items()} if fmt in other_fmts else files
         t = step(f"format:{fmt}", t, _STEPS["write"] * 0.8 / len(fmts))
 
     if profile.max_file_mb:
@@ -320,7 +389,8 @@ def export_design(
         "schema": "saucerfab.export/1",
         "saucerfab_version": __version__,
         "printer": {"key": profile.key, "name": profile.name},
-        "formats": fmts,
+        "formats": print_fmts,
+        "other_formats": other_fmts,
         "cup_diameter_mm": scene.cup_diameter_mm,
         "mm_per_unit": scene.mm_per_unit,
         "triangles": ntri,
@@ -360,4 +430,7 @@ def export_design(
         unseen_fraction=bake_stats["unseen_fraction"],
         warnings=[*format_warnings, *solid.warnings],
         timings=timings,
+        printer_source=printer_source,
+        other_formats=other_fmts,
+        profile=profile,
     )

@@ -20,40 +20,48 @@ from saucerfab.fileio import atomic_dir
 from saucerfab.formats import WRITERS, lookup
 
 
-def normalize_formats(
-    formats: Sequence[str], accepted: Sequence[str], printer_name: str
-) -> tuple[list[str], list[str]]:
-    """Lower-cased, de-duplicated formats in the given order, each known; and warnings.
+#: the subfolder of an export that holds the files of formats the printer does not take, written on
+#: request (``allow_other=True``, ``saucerfab export --allow-format``): outside the print set, so every
+#: file a bureau finds at the folder's top level is one its printer takes
+OTHER_FORMATS_DIR = "other-formats"
 
-    A known format that ``accepted`` (the printer profile's list) lacks is
-    kept, with a warning: the designer may want it for something else (a GLB
-    to share a preview), and the profile may be behind the printer's software.
+
+def normalize_formats(
+    formats: Sequence[str], accepted: Sequence[str], printer_name: str, allow_other: bool = False
+) -> tuple[list[str], list[str]]:
+    """Lower-cased, de-duplicated formats in the given order, each known; split by what the printer takes.
+
+    One rule: a known format that ``accepted`` (the printer profile's list)
+    lacks is refused before anything is written, unless ``allow_other``;
+    then it is written outside the print set, into :data:`OTHER_FORMATS_DIR`
+    (a GLB to share a preview, say), and checked without the printer's
+    format list.
 
     Returns:
-        ``(formats, warnings)``: the formats to write, and one line per
-        format the profile does not list.
+        ``(print_formats, other_formats)``: the formats the printer takes, and
+        the others asked for (empty unless ``allow_other``), each in the given order.
 
     Raises:
-        ExportError: an unknown format, or none given.
+        ExportError: an unknown format, none given, or a format the printer
+            does not take without ``allow_other``.
     """
     out: list[str] = []
-    warnings: list[str] = []
     for f in formats:
         found = lookup(f)
         if found is None or found.key not in WRITERS:
             raise ExportError(f"unknown export format {f!r}; known: {', '.join(WRITERS)}")
-        key = found.key
-        if key in out:
-            continue
-        out.append(key)
-        if key not in accepted:
-            warnings.append(
-                f"{printer_name}'s profile does not list {key!r}; written anyway "
-                f"(check that the printer takes it; the profile lists {', '.join(accepted)})"
-            )
+        if found.key not in out:
+            out.append(found.key)
     if not out:
         raise ExportError("no export format given; name at least one, e.g. --formats 3mf")
-    return out, warnings
+    others = [k for k in out if k not in accepted]
+    if others and not allow_other:
+        raise ExportError(
+            f"{printer_name} does not take {', '.join(o.upper() for o in others)} (its profile lists "
+            f"{', '.join(accepted)}); give formats it takes, or add --allow-format to write "
+            f"{'it' if len(others) == 1 else 'them'} anyway into {OTHER_FORMATS_DIR}/, outside the print set"
+        )
+    return [k for k in out if k in accepted], others
 
 
 def render(mesh: TexturedMesh, fmt: str, options: FabOptions) -> dict[str, bytes]:
@@ -77,7 +85,7 @@ def merge_files(per_format: Mapping[str, Mapping[str, bytes]], extra: Mapping[st
 
 
 def write_folder(out: str | os.PathLike[str], files: Mapping[str, bytes]) -> Path:
-    """Write ``files`` (flat names) as the folder ``out``, atomically.
+    """Write ``files`` (flat names, or ``other-formats/<name>``) as the folder ``out``, atomically.
 
     An existing ``out`` is replaced only if it is empty or a previous export
     (it holds ``export.json``), so a typo cannot wipe an unrelated folder.
@@ -97,8 +105,10 @@ def write_folder(out: str | os.PathLike[str], files: Mapping[str, bytes]) -> Pat
     try:
         with atomic_dir(path) as tmp:  # which gives the folder the usual mode (umask applies)
             for name, data in files.items():
-                if "/" in name or "\\" in name or name.startswith("."):
+                sub, _, base = name.rpartition("/")
+                if sub not in ("", OTHER_FORMATS_DIR) or "\\" in base or not base or base.startswith("."):
                     raise ExportError(f"internal error: bad output file name {name!r}")
+                (tmp / sub).mkdir(exist_ok=True)
                 (tmp / name).write_bytes(data)
     except OSError as exc:
         raise ExportError(f"cannot write {str(path)!r}: {exc}") from None

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, make_dataclass
 from pathlib import Path
 
 from saucerfab.errors import ConfigError
-from saucerfab.eyes import DEFAULT_IPD_MM, DESIGN_EYES_USAGE, EyeSpec, parse_eyes
+from saucerfab.eyes import DEFAULT_IPD_MM, EYES_USAGE, OLD_DESIGN_EYE_NAME, EyeSpec, parse_eyes
 from saucerfab.heightfield import HEIGHT_SCALE
 from saucerfab.images import FITS
 from saucerfab.optimize.energies import WEIGHTS
@@ -79,7 +79,7 @@ class DesignRequest(_Weights):
             does too). At weight 1 a face covering a few pixels settles near
             c = 0.33 instead of the enhancement's black, which blunts the
             black-white contrast; at the default 0.01 the full method reaches
-            lower E_visual and E_deform (RESULTS.md).
+            lower E_visual and E_deform (benchmarks/results/HISTORY.md, "Design (issue 4)").
         max_iters: iteration cap for every stage; None (the default): the
             cap of the method that runs (:data:`saucerfab.optimize.stages.STAGE_CAPS`:
             under "auto" 120 for pictures with the black-white enhancement
@@ -94,7 +94,8 @@ class DesignRequest(_Weights):
             skips it (120 each); "paper" runs Algorithm 1's three stages as
             written, to 400 iterations each. The ablations always run as the
             paper wrote them ("fast" with one is refused). Measured in
-            benchmarks/RESULTS.md; the module docstring of
+            benchmarks/RESULTS.md, Design speed against its anchors; the
+            module docstring of
             :mod:`saucerfab.optimize.stages`.
         frames: "inscribed" (the default) re-aims the scene's view frames at
             the largest square wholly on the saucer and wholly on its
@@ -104,7 +105,8 @@ class DesignRequest(_Weights):
             saucer fills each frame (the pictures' margins fall off it);
             "scene" keeps the scene's frames as they are (the paper's
             preset, which puts part of each picture where no saucer is).
-            Measured in benchmarks/RESULTS.md (Verify, Default path). See
+            Measured in benchmarks/results/HISTORY.md ("Verify (issue 13)",
+            "Default path (issue 14, in part)"). See
             :mod:`saucerfab.optimize.framing`.
         enhancement: "auto" (the default) uses the paper's black-white
             enhancement when every picture has a clear subject (an alpha
@@ -137,7 +139,8 @@ class DesignRequest(_Weights):
             (:func:`saucerfab.optimize.regions.best_placement`); "as_given"
             keeps the cup's rotation.
         eyes: where the design is optimised for (:mod:`saucerfab.eyes`, one definition
-            with ``saucerfab verify``): "point" (the paper: the design eye alone),
+            with ``saucerfab verify``): "design" (the paper: the design eye alone;
+            "point", its older name, is read as "design"),
             "both" (the design eye and a viewer's two eyes, ``ipd_mm`` apart along the
             direct view's right axis) or "box:W,H[,N]" (an N x N grid of eyes, W x H mm,
             around the design eye). Millimetres at the design's scale
@@ -174,14 +177,12 @@ class DesignRequest(_Weights):
     prism_placement: str = PRISM_PLACEMENTS[0]
     color_init: str = COLOR_INITS[0]
     record_times: bool = True
-    eyes: str = "point"
+    eyes: str = "design"
     ipd_mm: float | None = None
 
     def eye_spec(self) -> EyeSpec:
         """The eyes the design is made for (:attr:`eyes`, :attr:`ipd_mm`), as verify takes them."""
         ipd = DEFAULT_IPD_MM if self.ipd_mm is None else self.ipd_mm
-        if isinstance(self.eyes, str) and self.eyes.strip().lower() == "design":  # verify's name for point
-            raise ConfigError(f"--eyes {self.eyes!r}: a design is made for {DESIGN_EYES_USAGE}")
         return parse_eyes(self.eyes, ipd)
 
     def fit_by_view(self) -> dict[str, str]:
@@ -234,7 +235,9 @@ class DesignRequest(_Weights):
         if not isinstance(self.printer, str) or not self.printer:
             raise ConfigError(f"printer must be a profile name such as 'j55' or a .toml path, got {self.printer!r}")
         if not isinstance(self.eyes, str):
-            raise ConfigError(f"eyes must be one of {DESIGN_EYES_USAGE}, got {self.eyes!r}")
+            raise ConfigError(f"eyes must be one of {EYES_USAGE}, got {self.eyes!r}")
+        if self.eyes.strip().lower() == OLD_DESIGN_EYE_NAME:  # one word in every command: the older name read
+            object.__setattr__(self, "eyes", "design")
         if self.ipd_mm is not None and (isinstance(self.ipd_mm, bool) or not isinstance(self.ipd_mm, (int, float))):
             raise ConfigError(f"ipd_mm must be a distance in mm, got {self.ipd_mm!r}")
         spec = self.eye_spec()  # refuses a bad --eyes or --ipd-mm now, before any work
@@ -247,7 +250,7 @@ class DesignRequest(_Weights):
         if spec.mode != "design" and self.reflected2 is not None:
             raise ConfigError(
                 f"--eyes {self.eyes} is not supported with a second reflected image (--reflected2) yet; "
-                "give --eyes point"
+                "give --eyes design"
             )
         v = self.max_iters
         if v is not None and (isinstance(v, bool) or not isinstance(v, int)):

@@ -123,7 +123,10 @@ def test_exit_codes_are_the_worst_over_files(files: dict[str, Path], capsys: pyt
     assert "Traceback" not in text
 
 
-def test_table_names_files_and_reasons(files: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+def test_table_names_files_and_reasons(
+    files: dict[str, Path], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr("saucerfab.cli.check.on_terminal", lambda: True)  # the table is for a terminal
     main(["check", str(files["open"]), "--printer", "j55"])
     out = capsys.readouterr().out
     assert "saucerfab check" in out and "not printable" in out
@@ -180,7 +183,10 @@ def test_junit_report(files: dict[str, Path], tmp_path: Path, capsys: pytest.Cap
     assert cases["image.obj"].find("error").get("type") == "not_a_mesh"
     assert cases["good.3mf"].find("failure") is None and cases["good.3mf"].find("error") is None
     assert "multiple_shells" in cases["two.ply"].find("system-out").text
-    rc = main(["check", str(files["two"]), "--strict", "--junit", str(out)])
+    # an existing report is replaced only with --force (the rule of every command that writes)
+    assert main(["check", str(files["two"]), "--strict", "--junit", str(out)]) == 2
+    assert "exists; add --force" in capsys.readouterr().err
+    rc = main(["check", str(files["two"]), "--strict", "--junit", str(out), "--force"])
     suite = ElementTree.fromstring(out.read_bytes()).find("testsuite")
     assert rc == 1 and suite.find("testcase/failure").get("type") == "multiple_shells"
 
@@ -280,6 +286,7 @@ def test_table_at_80_columns_keeps_verdicts_and_file_names(
     _deep_files(tmp_path)
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("COLUMNS", "80")
+    monkeypatch.setattr("saucerfab.cli.check.on_terminal", lambda: True)  # the table is for a terminal
     saucer = "tmp/some/deep/folder/runs/e1/saucer.3mf"
     box = "tmp/some/deep/folder/runs/e1/open_box_with_a_long_name.stl"
     assert main(["check", saucer, box]) == 1

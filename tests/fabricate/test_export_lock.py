@@ -79,8 +79,8 @@ def test_a_second_export_into_the_same_folder_fails_at_once(
     assert codes["a"] == 0
     assert (out / "saucer.3mf").is_file() and not (out / "saucer.ply").exists()  # A's files, as A reported
     assert not (tmp_path / ".print.export.lock").exists()  # no lock file left beside the folder
-    # once A is done, the folder is free again
-    assert main(["export", str(design_dir), "--formats", "ply", *QUICK, "-o", str(out)]) == 0
+    # once A is done, the folder is free again (A's export is replaced with --force)
+    assert main(["export", str(design_dir), "--formats", "ply", *QUICK, "--force", "-o", str(out)]) == 0
     assert (out / "saucer.ply").is_file()
 
 

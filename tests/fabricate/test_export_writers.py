@@ -162,10 +162,10 @@ def test_normalize_formats() -> None:
     assert registry.normalize_formats(["3MF", ".obj", "vrml", "3mf"], acc, "P") == (["3mf", "obj", "wrl"], [])
     with pytest.raises(ExportError, match="unknown export format 'fbx'"):
         registry.normalize_formats(["fbx"], acc, "P")
-    # a known format the profile does not list is written, with one warning
-    fmts, warnings = registry.normalize_formats(["glb", "3mf", ".GLB"], acc, "P")
-    assert fmts == ["glb", "3mf"] and len(warnings) == 1
-    assert warnings[0].startswith("P's profile does not list 'glb'; written anyway (check that the printer takes it")
+    # a known format the printer does not take is refused, or set apart on request (one rule)
+    with pytest.raises(ExportError, match=r"P does not take GLB \(its profile lists 3mf, obj, wrl\).*--allow-format"):
+        registry.normalize_formats(["glb", "3mf", ".GLB"], acc, "P")
+    assert registry.normalize_formats(["glb", "3mf", ".GLB"], acc, "P", allow_other=True) == (["3mf"], ["glb"])
     with pytest.raises(ExportError, match="no export format"):
         registry.normalize_formats([], acc, "P")
 

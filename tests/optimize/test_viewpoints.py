@@ -41,7 +41,9 @@ def test_verify_and_design_share_one_definition_of_the_eyes() -> None:
 
     assert verify_eyes.eye_positions is eye_positions and verify_eyes.DEFAULT_IPD_MM == DEFAULT_IPD_MM == 64.0
     assert parse_eyes("point").mode == parse_eyes("design").mode == "design"
-    assert DesignRequest.default("eyes") == "point" and DesignRequest.default("ipd_mm") is None
+    # one word for the design eye alone in every command; the older "point" is read as it
+    assert DesignRequest.default("eyes") == "design" and DesignRequest.default("ipd_mm") is None
+    assert DesignRequest("a.png", "b.png", eyes="point").eyes == "design"
     # model units and millimetres give the same eyes
     scene, _ = _small()
     s = scene.mm_per_unit
@@ -243,7 +245,6 @@ def test_eyes_point_leaves_the_design_folder_as_before(tmp_path) -> None:  # noq
         (dict(eyes="sideways"), "--eyes"),
         (dict(eyes="box:40"), "box:W,H"),
         (dict(eyes="box:40,20,1"), "N must be"),
-        (dict(eyes="design"), "point"),
         (dict(eyes=3), "eyes must be"),
         (dict(eyes="both", ipd_mm="64"), "ipd_mm must be"),
         (dict(eyes="both", reflected2="x.png", cup="prism:6"), "reflected2"),
