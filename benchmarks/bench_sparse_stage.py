@@ -13,7 +13,7 @@ itself, i.e. setting (c) of Figure 11.
     .venv/bin/python benchmarks/bench_sparse_stage.py --rules global,coordinate --cache /tmp/he.npz
 
 This is what decided the stage's sigma (1e-5) and its per-coordinate
-boundary rule; ``benchmarks/RESULTS.md`` has the figures.
+boundary rule; ``benchmarks/results/HISTORY.md``, "Design (issue 4)", has the figures.
 """
 
 from __future__ import annotations

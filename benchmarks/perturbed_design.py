@@ -9,7 +9,7 @@ stages are unchanged, so the designs differ only by the path a few
 last-bit differences send the solver down, as a rounding-level change of
 any kernel does. ``bench_speed.py --noise K`` runs K of these per pair to
 say how far the verified pictures move by that alone: the yardstick for a
-change that alters the path (benchmarks/RESULTS.md, session 13).
+change that alters the path (benchmarks/results/HISTORY.md, "The optimizer's path noise").
 """
 
 from __future__ import annotations

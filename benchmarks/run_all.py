@@ -1,6 +1,6 @@
 """Run every benchmark in turn (``make bench``); each prints its own table.
 
-Figures worth keeping go into ``benchmarks/RESULTS.md`` with the machine;
+The current figures go into ``benchmarks/RESULTS.md`` with the machine;
 the per-topic detail is in ``benchmarks/results/``. Benchmarks time things,
 so run them on a quiet machine: ratios against the reference measured in the
 same run hold under load, absolute times do not.

@@ -17,7 +17,8 @@ __version__ = "0.1.0"
 # millisecond) bridges the gaps between one step's torch ops and then frees
 # the cores: default designs took 7-14 % less time than with passive waiting
 # alone (three pairs, two to six interleaved runs of each, issue 18, session
-# 16: benchmarks/RESULTS.md). Both must be chosen before torch (and its OpenMP
+# 16: benchmarks/results/HISTORY.md, "The default design with less fixed
+# cost"). Both must be chosen before torch (and its OpenMP
 # runtime) is loaded, and every entry point imports this package first. A
 # user's own setting of either wins.
 if "OMP_WAIT_POLICY" not in _os.environ:

@@ -7,7 +7,7 @@ passes per line and step plus a bisection of 30 rounds whose each round is
 about a hundred small numpy calls. Here each vertex walks its three mesh
 lines in a plain loop: a whole projection step on the 150 x 150 grid took
 2.2-5.9x less time (``benchmarks/bench_relief.py``; in a design the sparse
-stage, whose spikes make thin crests, about 0.7x: benchmarks/RESULTS.md).
+stage, whose spikes make thin crests, about 0.7x: benchmarks/results/HISTORY.md, "The relief projection").
 The feature rule's pass (:func:`feature_crests`) was a dozen whole-grid numpy
 operations per line and sweep, about 1.2 ms a projection step; here one loop.
 

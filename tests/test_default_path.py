@@ -3,7 +3,8 @@ the default design exports for every bundled printer profile with exit 0, in eve
 format the profile takes, and ``saucerfab check --strict`` passes on each file.
 
 Small sizes (a 40 x 40 grid, 96 px renders, few iterations; the atlas is the printer's own) keep
-this in CI; the full-size figures are benchmarks/RESULTS.md's (bench_verify.py).
+this in CI; the full-size figures are in benchmarks/results/HISTORY.md, "Default path,
+printable (issue 14)" (bench_verify.py).
 """
 
 from __future__ import annotations

@@ -313,7 +313,8 @@ TERMS: tuple[Term, ...] = (
             Weight(
                 "barrier_weight",
                 # why 0.01: DesignRequest's docstring (the paper's 1 blunts the black-white contrast)
-                "weight of the log barriers (eq. 5); 1 = the paper as written, see RESULTS.md",
+                "weight of the log barriers (eq. 5); 1 = the paper as written, see "
+                "benchmarks/results/HISTORY.md, Design",
                 default=0.01,
                 positive=True,
             ),

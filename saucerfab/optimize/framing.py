@@ -21,7 +21,7 @@ measured with ``saucerfab verify`` it shows each whole picture (100 % of
 both frames on the saucer and its reflection), where ``contain`` loses the
 reflected frame's corners (72 %) and the paper's preset (``frames="scene"``,
 still available) shows 66 % of the direct and 31 % of the reflected frame
-(benchmarks/RESULTS.md, Verify and Default path).
+(benchmarks/results/HISTORY.md, "Verify (issue 13)" and "Default path (issue 14, in part)").
 """
 
 from __future__ import annotations

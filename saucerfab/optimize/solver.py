@@ -29,7 +29,7 @@ Each iteration:
    they converge three times sooner and lower their own objective further
    (first stage: 114 iterations to E 12311 against 400 to 14681), yet the
    full method's final E_visual against the real images was 1.4-4.4 %
-   worse on the three bundled pairs (benchmarks/RESULTS.md, Design);
+   worse on the three bundled pairs (benchmarks/results/HISTORY.md, "Design (issue 4)");
 5. a backtracking line search on ``beta`` in {1, 1/2, 1/4, ...}: a trial is
    accepted when it is strictly feasible (checked again, against rounding)
    and the full objective decreases by Armijo's rule. If no trial is

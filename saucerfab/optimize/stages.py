@@ -25,7 +25,7 @@ iteration cap per stage (:data:`STAGE_CAPS`; ``--max-iters`` overrides it):
   default before issue 18), skipping the stage raised the verified
   pictures of the subject pairs by 0.7 dB from the design eye on average
   but lowered the photographs' by 0.6 dB; the photographs' three stages at
-  90 iterations raised theirs by 0.3 dB (benchmarks/RESULTS.md, "The
+  90 iterations raised theirs by 0.3 dB (benchmarks/results/HISTORY.md, "The
   default method", issue 18).
 - ``"fast"`` always skips it (120 iterations a stage): the quickest.
 - ``"paper"`` runs Algorithm 1's three stages as written, each to
@@ -48,7 +48,7 @@ the bundled samples the line searches failed within 10-16 iterations and the
 moves made raised the final E_visual (7461 -> 7485-7528 over the lambdas,
 prox steps and line-search lengths tried). At sigma 1e-5 the same stage (the
 paper's lambda and alpha) moves 8 % of the vertices and lowers the final
-E_visual by 3.7 % (``benchmarks/bench_sparse_stage.py``; benchmarks/RESULTS.md).
+E_visual by 3.7 % (``benchmarks/bench_sparse_stage.py``; benchmarks/results/HISTORY.md, "Design (issue 4)").
 
 The energies a stage can use are declared in :mod:`saucerfab.optimize.energies`
 (:data:`~saucerfab.optimize.energies.TERMS`); a stage names its regulariser
@@ -201,7 +201,7 @@ def without_enhancement(stages: list[StageSpec]) -> list[StageSpec]:
     """The same stages against the original images (for pictures with no clear subject).
 
     Of the paper's method this is Figure 11 (e), Laplacian then sparse
-    without enhancement, which benchmarks/RESULTS.md measures as good as or
+    without enhancement, which benchmarks/results/HISTORY.md ("Design (issue 4)") measures as good as or
     better than the full method on 2 of 3 bundled pairs.
     """
     return [

@@ -32,7 +32,10 @@ def sparse_binary_stl(path: Path, n: int) -> Path:
 
 
 def test_defaults_keep_every_file_within_10_s_and_1_gib() -> None:
-    """The measured budget (benchmarks/RESULTS.md): 500 k triangles, 3 vertices each, one 8192^2 texture."""
+    """The measured budget (benchmarks/RESULTS.md, Checker budgets).
+
+    500 k triangles, 3 vertices each, one 8192^2 texture.
+    """
     lim = Limits()
     assert lim.max_triangles == 500_000 and lim.max_vertices == 3 * lim.max_triangles
     assert lim.max_total_texture_pixels == lim.max_texture_pixels == 8192 * 8192
