@@ -22,13 +22,15 @@ import hashlib
 import json
 import threading
 from collections import OrderedDict
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, get_args
 
 import numpy as np
 
+from saucerfab.check.report import Severity
 from saucerfab.imageio import png_bytes
+from saucerfab.labels import design_name, energy_label, method_text, stage_label, stop_label
 from saucerfab.report import Section, html_report
 
 if TYPE_CHECKING:
@@ -197,7 +199,10 @@ def design_report(design: Design, previews: Mapping[str, bytes], folder: Path | 
                   f"{scene.saucer.delta * s:.2f} mm, {scene.saucer.resolution} x {scene.saucer.resolution} grid",
         "made for": _made_for(params.get("print_target"), metrics.get("printable")),
         "frames": str(params.get("frames", "-")),
-        "method": str(params.get("ablation", "-")),
+        # the method as `saucerfab design` printed it (asked for, and what ran); "ablation" only when it is one
+        "method": method_text(params),
+        **({"ablation": f"{params['ablation']} (one of the paper's Figure 11 settings)"}
+           if params.get("ablation", "full") != "full" else {}),
         "where to stand": _stand(where),
         "max |h - z|": f"{metrics.get('max_abs_height_change', float('nan')) * s:.3f} mm",
         "saucerfab": __version__,
@@ -239,7 +244,8 @@ def design_report(design: Design, previews: Mapping[str, bytes], folder: Path | 
         sections.append(Section("Height change", images=[("|h - z| over the saucer", hc)]))
     en = pic("energies.png")
     rows = [
-        [st.get("name"), st.get("targets"), f"{st.get('sigma', 0):g}", st.get("iterations"), st.get("stop_reason"),
+        # the stage's label says its targets and sigma (the sparse stage's targets are those before it)
+        [stage_label(str(st.get("name"))), st.get("iterations"), stop_label(str(st.get("stop_reason"))),
          f"{st.get('E_visual', float('nan')):.1f}", f"{st.get('E_deform', float('nan')):.4f}",
          f"{st['seconds']:.1f}" if "seconds" in st else "-"]
         for st in metrics.get("stages", [])
@@ -247,11 +253,10 @@ def design_report(design: Design, previews: Mapping[str, bytes], folder: Path | 
     sections.append(Section(
         "Energies and stages",
         images=[("energies over time", en)] if en else [],
-        grid=(["stage", "targets", "sigma", "iterations", "stopped", "E_visual", "E_deform", "seconds"], rows),
+        grid=(["stage", "iterations", "stopped", energy_label("E_visual"), energy_label("E_deform"),
+               "seconds"], rows),
     ))
-    names = " / ".join(str(design.inputs[k].get("file")) for k in ("direct", "reflected", "reflected2")
-                       if isinstance(design.inputs.get(k), dict))
-    return html_report(sections, title=f"saucerfab design: {names or 'synthetic'}")
+    return html_report(sections, title=f"saucerfab design: {design_name(design.inputs)}")
 
 
 def write_design_report(folder: str | Path) -> Path:
@@ -359,15 +364,9 @@ def export_report(folder: str | Path) -> str:
                "wrote them): design it again from its pictures, then export")
         ver_section = Section("Verified: what the print shows", f"Not verified: {why}.")
     sections.append(ver_section)
-    chk = _json(folder / "check.json")
-    if chk and isinstance(chk.get("files"), list):
-        rows = []
-        for rep in chk["files"]:
-            for fnd in rep.get("findings", []) or [{"severity": "-", "message": "no findings"}]:
-                if fnd.get("severity") in ("error", "warning", "-"):
-                    rows.append([Path(str(rep.get("path", ""))).name, rep.get("verdict"), fnd.get("severity"),
-                                 fnd.get("message")])
-        sections.append(Section("Printability (saucerfab check)", grid=(["file", "verdict", "severity", "finding"], rows)))
+    chk = printability_section(_json(folder / "check.json"))
+    if chk is not None:
+        sections.append(chk)
     meshes = find_mesh_files(folder)
     if meshes:
         fmt, path = meshes[0]
@@ -378,7 +377,69 @@ def export_report(folder: str | Path) -> str:
             _glb(surf.vertices, surf.faces, surf.corner_uv, texture), scene_raw,
             f"{path.name} as read back from the file, with the mirror cup",
         ))
-    return html_report(sections, title=f"saucerfab print: {folder.name}")
+    return html_report(sections, title=print_title(summary, folder))
+
+
+def print_title(summary: Mapping[str, Any], folder: Path) -> str:
+    """A print report's title: the design's pictures and the printer (the folder's name only for an old export.json)."""
+    design = summary.get("design")
+    inputs = design.get("inputs") if isinstance(design, Mapping) else None
+    name = design_name(inputs) if isinstance(inputs, Mapping) else folder.resolve().name
+    printer = summary.get("printer")
+    made_for = printer.get("name") if isinstance(printer, Mapping) else None
+    return f"saucerfab print: {name}" + (f" for {made_for}" if made_for else "")
+
+
+#: the check's severities, worst first ("error", "warning", "info")
+SEVERITIES: tuple[str, ...] = get_args(Severity)
+
+
+def finding_counts(findings: Iterable[Any]) -> dict[str, int]:
+    """How many of a check report's findings (check.json's dicts) have each severity: {"error": n, ...}."""
+    counts = dict.fromkeys(SEVERITIES, 0)
+    for f in findings:
+        sev = f.get("severity") if isinstance(f, Mapping) else None
+        if sev in counts:
+            counts[sev] += 1
+    return counts
+
+
+def counts_text(counts: Mapping[str, int]) -> str:
+    """``0 errors, 0 warnings, 2 info findings`` (``finding_counts``' counts)."""
+    e, w, i = (int(counts.get(k, 0)) for k in SEVERITIES)
+    return (f"{e} error{'s' if e != 1 else ''}, {w} warning{'s' if w != 1 else ''}, "
+            f"{i} info finding{'s' if i != 1 else ''}")
+
+
+def printability_section(chk: Mapping[str, Any] | None) -> Section | None:
+    """check.json (``saucerfab.check/1``) as a section: the verdict with the counts, then every finding as a row.
+
+    Info findings are notes (the units an OBJ assumes, the 3MF reader that read the file), not faults:
+    a print with only those is printable, and says so, as the studio does. Each file has a row even
+    without findings. None when there is no check.json.
+    """
+    if not chk or not isinstance(chk.get("files"), list):
+        return None
+    title = "Printability (saucerfab check)"
+    reports = [r for r in chk["files"] if isinstance(r, Mapping)]
+    if not reports:
+        return Section(title, "Not checked: saucerfab's checker was not available when the print was exported; "
+                              "run 'saucerfab check' on the print files.")
+    counts = finding_counts(f for r in reports for f in r.get("findings") or [])
+    bad = [r for r in reports if r.get("verdict") != "printable"]
+    n = len(reports)
+    checked = f"{n} file{'s' if n != 1 else ''} checked: {counts_text(counts)}"
+    verdict = (f"Printable: every file passes ({checked})." if not bad else
+               f"Not printable: {len(bad)} of {n} files fail ({checked}).")
+    rows = []
+    for r in reports:
+        name = Path(str(r.get("path", ""))).name
+        found = [f for f in r.get("findings") or [] if isinstance(f, Mapping)]
+        rows += [[name, r.get("verdict"), f.get("severity"), f"{f.get('message')} ({f.get('code')})"] for f in found]
+        if not found:
+            rows.append([name, r.get("verdict"), "-", "no findings"])
+    return Section(title, verdict + (" Info findings are notes, not faults." if counts["info"] else ""),
+                   grid=(["file", "verdict", "severity", "finding"], rows))
 
 
 def refresh_export_report(folder: str | Path) -> Path:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import json
+from html import escape as html_escape
 import re
 import shutil
 from pathlib import Path
@@ -19,6 +20,7 @@ from PIL import Image
 
 import browser
 from saucerfab.cli import main
+from saucerfab.labels import STAGE_LABELS, STOP_LABELS
 
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 ARTIFACTS = Path(__file__).resolve().parents[1] / "out" / "test-artifacts"
@@ -47,7 +49,7 @@ def test_design_folder_has_a_self_contained_report(folders):
     html = (design / "report.html").read_text(encoding="utf-8")
     _no_network(html)
     for words in ("Inputs, masks and enhanced targets", "Energies and stages", "Height change",
-                  "where to stand", "In 3D", "bw_sigma_large", "A trial export of this design"):
+                  "where to stand", "In 3D", "A trial export of this design"):
         assert words in html, words
     assert html.count("data:image/png;base64,") >= 14  # previews, references and the six verify pictures
     ver = json.loads((design / "verify" / "verify.json").read_text())
@@ -68,6 +70,80 @@ def test_export_writes_checks_verify_and_report(folders, capsys):
     for words in ("Verified: what the print shows", "Printability (saucerfab check)", "saucer.3mf",
                   "whole-picture shift", "flat print", "where to stand"):
         assert words in html, words
+
+
+def test_design_report_says_the_method_and_stages_in_the_clis_words(folders):
+    design, _ = folders
+    html = (design / "report.html").read_text(encoding="utf-8")
+    # the method as asked and as run (the CLI prints "method auto (the default): ..."), not the ablation's "full"
+    assert "<th>method</th><td>auto (the default): 2 stages (the small-sigma stage skipped" in html, html[:3000]
+    assert "at most 10 iterations a stage" in html
+    assert "<td>full</td>" not in html and "<th>ablation</th>" not in html
+    # the stage table in people's words: the label, the stop reason, the energies' names
+    assert f"<td>{html_escape(STAGE_LABELS['bw_sigma_large'])}</td>" in html
+    assert f"<td>{STOP_LABELS['max_iters']}</td>" in html and "<th>image error</th>" in html
+    for key in ("<td>bw_sigma_large</td>", "<td>max_iters</td>", "<th>E_visual</th>"):
+        assert key not in html, key
+    assert "<title>saucerfab design: direct_heart.png / reflected_star.png</title>" in html
+
+
+def test_print_report_is_titled_by_the_design_and_printer(folders):
+    _, print_dir = folders  # the folder is called "print": the title must not be
+    html = (print_dir / "report.html").read_text(encoding="utf-8")
+    title = "saucerfab print: direct_heart.png / reflected_star.png for Stratasys J55 Prime"
+    assert f"<title>{title}</title>" in html and f"<h1>{title}</h1>" in html
+
+
+def _finding(severity: str, code: str, message: str) -> dict:
+    return {"severity": severity, "code": code, "message": message, "where": None}
+
+
+def _check_json(*files: tuple[str, str, list[dict]]) -> str:
+    return json.dumps({"schema": "saucerfab.check/1", "files": [
+        {"path": p, "verdict": v, "exit_code": 0 if v == "printable" else 1, "findings": f} for p, v, f in files]})
+
+
+def _printability(html: str) -> str:
+    """The printability section of a page."""
+    part = html.split("<h2>Printability (saucerfab check)</h2>", 1)[1]
+    return part.split("</section>", 1)[0]
+
+
+def test_print_report_with_only_info_findings_says_printable_with_counts(folders, tmp_path):
+    from saucerfab.report_page import export_report
+
+    _, print_dir = folders
+    folder = tmp_path / "print"
+    shutil.copytree(print_dir, folder)
+    (folder / "check.json").write_text(_check_json(
+        ("saucer.3mf", "printable", [_finding("info", "lib3mf_reads", "lib3mf reads the file in strict mode")]),
+        ("saucer.obj", "printable", [_finding("info", "units", "OBJ states no units; read as millimetres")]),
+    ))
+    section = _printability(export_report(folder))
+    assert ("Printable: every file passes (2 files checked: 0 errors, 0 warnings, 2 info findings)."
+            in section), section
+    # the info findings are rows, as the studio lists them
+    assert section.count("<tr>") == 3, section
+    assert "<td>saucer.obj</td><td>printable</td><td>info</td><td>OBJ states no units" in section, section
+
+
+def test_print_report_with_an_error_says_not_printable(folders, tmp_path):
+    from saucerfab.report_page import export_report
+
+    _, print_dir = folders
+    folder = tmp_path / "print"
+    shutil.copytree(print_dir, folder)
+    (folder / "check.json").write_text(_check_json(
+        ("saucer.3mf", "not printable", [_finding("error", "not_watertight", "12 open edges"),
+                                         _finding("warning", "thin_wall", "a wall of 0.2 mm")]),
+        ("saucer.obj", "printable", []),
+    ))
+    section = _printability(export_report(folder))
+    assert "Not printable: 1 of 2 files fail (2 files checked: 1 error, 1 warning, 0 info findings)." in section
+    assert "<td>not_printable</td>" not in section and "12 open edges (not_watertight)" in section
+    assert "<td>saucer.obj</td><td>printable</td><td>-</td><td>no findings</td>" in section, section
+    (folder / "check.json").write_text(json.dumps({"schema": "saucerfab.check/1", "files": []}))
+    assert "Not checked" in _printability(export_report(folder))
 
 
 def test_export_prints_the_quick_verify_and_no_verify_skips_it(folders, tmp_path, capsys):

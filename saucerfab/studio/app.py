@@ -34,6 +34,7 @@ from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
 from saucerfab.errors import SaucerfabError
+from saucerfab.labels import api_labels
 from saucerfab.studio import options as opts
 from saucerfab.studio.guard import LOOPBACK_NAMES, HostOriginGuard
 from saucerfab.studio.jobs import DEFAULT_JOBS, Job, JobQueue
@@ -145,6 +146,8 @@ def create_app(
             choices.update(await run_in_threadpool(opts.option_choices))
         return _json_response({
             **choices,
+            # people's words for the stage, energy and stop-reason keys the progress and results carry
+            "labels": api_labels(),
             "limits": {"max_upload_bytes": max_upload_bytes, "max_pixels": pixels},
             "samples": [{"name": n, "role": role, "url": f"/api/samples/{n}"} for n, (_, role) in samples.items()],
         })

@@ -99,16 +99,24 @@ def thumb_url(run_id: str, run_dir: Path, rec: dict[str, Any]) -> str | None:
 
 
 def checks_summary(print_folder: Path) -> list[dict[str, Any]]:
-    """check.json of a print folder, per file: {file, verdict, printable, findings [{code, severity, message}]}."""
+    """check.json of a print folder, per file: {file, verdict, printable, counts, findings [{code, severity, message}]}.
+
+    ``counts`` is {"error": n, "warning": n, "info": n} and ``counts_text`` says it in words, as the
+    print's report.html does (:func:`saucerfab.report_page.finding_counts`).
+    """
+    from saucerfab.report_page import counts_text, finding_counts
+
     doc = _json(print_folder / "check.json")
     out = []
     for rep in (doc or {}).get("files", []):
         if isinstance(rep, dict):
+            findings = [f for f in rep.get("findings", []) if isinstance(f, dict)]
+            counts = finding_counts(findings)
             out.append({
                 "file": str(rep.get("path", "")), "verdict": rep.get("verdict"),
                 "printable": rep.get("verdict") == "printable",
-                "findings": [{k: f.get(k) for k in ("code", "severity", "message")}
-                             for f in rep.get("findings", []) if isinstance(f, dict)],
+                "counts": counts, "counts_text": counts_text(counts),
+                "findings": [{k: f.get(k) for k in ("code", "severity", "message")} for f in findings],
             })
     return out
 
@@ -139,6 +147,7 @@ def viewer_page(run_dir: Path) -> Path:
     import html
 
     from saucerfab.design import load_design
+    from saucerfab.labels import design_name
     from saucerfab.report_page import design_viewer_section
 
     design_dir = run_dir / "design"
@@ -147,17 +156,10 @@ def viewer_page(run_dir: Path) -> Path:
     if page.is_file() and page.stat().st_mtime >= stamp:
         return page
     design = load_design(design_dir)
-    names = " / ".join(str(design.inputs[k].get("file")) for k in ("direct", "reflected", "reflected2")
-                       if isinstance(design.inputs.get(k), dict))
     body = design_viewer_section(design).html or ""
     write_text_atomic(page, (
         '<!doctype html>\n<html lang="en"><head><meta charset="utf-8">'
-        f"<title>saucerfab studio 3D: {html.escape(names)}</title>"
+        f"<title>saucerfab studio 3D: {html.escape(design_name(design.inputs))}</title>"
         "<style>body{margin:0;background:#f0f1f3}.saucer-viewer{margin:0!important}"
         ".saucer-viewer>p{padding:0 .6em .4em}</style></head>\n<body>\n" + body + "\n</body></html>\n"))
-    return page
-    design = load_design(design_dir)
-    names = " / ".join(str(design.inputs[k].get("file")) for k in ("direct", "reflected", "reflected2")
-                       if isinstance(design.inputs.get(k), dict))
-    write_text_atomic(page, html_report([design_viewer_section(design)], title=f"saucerfab studio 3D: {names}"))
     return page

@@ -36,6 +36,8 @@ import pytest
 import browser
 from live_studio import free_port, http_get, start_studio, stop_studio
 
+from saucerfab.labels import STAGE_LABELS
+
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "samples"
 ARTIFACTS = ROOT / "out" / "test-artifacts" / "studio"
@@ -98,6 +100,14 @@ def _wait(page: Any, what: str, check: Any, timeout_s: float, errors: list[str])
 _EXPECTED_400 = re.compile(r"Failed to load resource: the server responded with a status of 400")
 
 
+#: the optimizer's keys as they would read if the page showed them raw ("bw_sigma_large", "bw sigma large",
+#: "E_barrier", "E barrier", "max_iters"): the page shows people's words (saucerfab/labels.py) instead
+RAW_KEY = re.compile(
+    r"\b(?:bw|plain)[_ ](?:free[_ ])?sigma|\bsigma[_ ](?:large|small)\b|\bE[_ ][a-z]+|\bmax[_ ]iters\b")
+#: what the progress line said before the first look came
+PREPARING = "preparing the first look"
+
+
 def _allowed(error: str) -> bool:
     """Aborted requests are the page's own doing, not faults: the event stream it closes once a
     design is done, an <img> whose src it replaced before the picture came."""
@@ -157,15 +167,20 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         page.click("#start")
         page.locator("#run").wait_for(state="visible", timeout=20_000)
 
-        seen = {"stage": False, "look": False}
+        seen: dict[str, Any] = {"stage": False, "look": False, "stale": None, "raw": set()}
 
         def progress_then_done() -> bool:
             status = page.locator("#run-status").inner_text()
             if status in ("failed", "cancelled", "interrupted"):
                 raise AssertionError(f"the design ended {status}: {page.locator('#run-error').inner_text()}")
-            if not seen["stage"] and re.search(r"Stage \d+ of 3\b", page.locator("#progress-stage").inner_text()):
+            line = page.locator("#progress-stage").inner_text()
+            if not seen["stage"] and re.search(r"Stage \d+ of 3\b", line):
                 seen["stage"] = True
             looks = page.locator("#looks").is_visible() and _images_loaded(page, "#looks-gallery img") >= 3
+            if looks and status == "running" and PREPARING in line:
+                seen["stale"] = line  # the first look is shown, yet the line still waits for it
+            if status == "running":
+                seen["raw"] |= set(RAW_KEY.findall(page.locator("#progress").inner_text()))
             if not seen["look"] and looks:
                 seen["look"] = True
                 _shot(page, "03-running")
@@ -174,6 +189,8 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         _wait(page, "the design to finish", progress_then_done, 75, errors)
         assert seen["look"], "no preview (first look) appeared while the design ran"
         assert seen["stage"], "no stage progress appeared while the design ran"
+        assert seen["stale"] is None, f"the progress line said {seen['stale']!r} with the first look shown"
+        assert not seen["raw"], f"the progress showed the optimizer's keys: {seen['raw']}"
 
         # ---- results: the views, the height change, verify, the 3D print ----
         page.locator("#results").wait_for(state="visible", timeout=10_000)
@@ -193,6 +210,11 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         _wait(page, "the 3D viewer", viewer_frame, 45, errors)
         canvas = viewer.locator("canvas").first.screenshot()
         assert browser.canvas_is_drawn(canvas), "the 3D viewer's canvas is blank"
+        page.locator("#stages summary").click()  # the stages the design ran, in people's words
+        stages_text = page.locator("#stages").inner_text()
+        for name in ("bw_sigma_large", "bw_sigma_small", "sparse"):  # --method paper, pictures with a subject
+            assert STAGE_LABELS[name] in stages_text, (name, stages_text)
+        assert not RAW_KEY.findall(page.locator("#run").inner_text()), page.locator("#run").inner_text()
         history = page.locator("#history li")
         _wait(page, "the design done in the history", lambda: "done" in " ".join(history.all_inner_texts()), 10, errors)
         assert history.count() == 1
@@ -213,6 +235,8 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         _wait(page, "the export", export_done, 75, errors)
         assert card.locator(".findings li").count() >= 1, card.inner_text()
         assert "printable" in card.inner_text()
+        counts = re.search(r"printable \(0 errors, 0 warnings, \d+ info findings?\)", card.inner_text())
+        assert counts, card.inner_text()  # the check's counts, as the print's report says them
         assert card.locator("table.verify tr").count() >= 2, card.inner_text()
         _shot(page, "05-export")
         with page.expect_download(timeout=20_000) as info:
@@ -269,3 +293,41 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         hard = [e for e in errors if not _allowed(e)]
         assert not hard, hard
     assert time.monotonic() - t_start < 150
+
+
+def test_progress_reads_in_peoples_words_once_the_first_look_is_in(studio: str, chromium: None) -> None:
+    """The progress line and energies for a given progress.json, through the page's own RunView.
+
+    A design's first look and its first stage report come a moment apart; here the progress
+    document of that moment is given, so the line is tested every run, not only when a run is
+    caught in between.
+    """
+    with browser.live_page((1000, 700)) as (page, errors):
+        page.goto(studio + "/", wait_until="load")
+        page.wait_for_selector("body[data-ready='true']", timeout=20_000)
+        shown = page.evaluate("""async () => {
+            const { RunView } = await import("/static/run.js");  // the page's module: its labels are set
+            const view = new RunView();
+            view.show({ id: "20260101-000000-abcd", status: "running", title: "t" });
+            const energies = { E_visual: 369712.3, E_deform: 0.01234, E_barrier: -1234.5, E_total: 369700.1 };
+            const read = () => [document.querySelector("#progress-stage").textContent,
+                                document.querySelector("#progress-energies").textContent];
+            view.progress({ stage: null, stages: 3, stage_index: 0, energies: {}, looks: null });
+            const before = read();
+            view.progress({ stage: null, stages: 3, stage_index: 0, energies: {},
+                            looks: { stage: "first_look", files: {} } });
+            const after = read();
+            view.progress({ stage: "bw_sigma_large", stages: 3, stage_index: 0, iteration: 2, max_iterations: 6,
+                            energies, looks: { stage: "first_look", files: {} } });
+            return { before, after, running: read() };
+        }""")
+        ARTIFACTS.mkdir(parents=True, exist_ok=True)
+        page.locator("#progress").screenshot(path=str(ARTIFACTS / "progress-labels.png"))  # for a person to look at
+        assert PREPARING in shown["before"][0], shown
+        assert PREPARING not in shown["after"][0] and "First look ready" in shown["after"][0], shown
+        line, values = shown["running"]
+        assert line == f"Stage 1 of 3: {STAGE_LABELS['bw_sigma_large']}, iteration 2 of 6", shown
+        assert "image error369,700" in values and "shape change0.01234" in values, values
+        assert "barrier" not in values and "objective" not in values, values  # the barrier's logs mean nothing
+        assert not RAW_KEY.findall(line + values), shown
+        assert not [e for e in errors if not _allowed(e)], errors

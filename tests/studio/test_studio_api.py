@@ -73,6 +73,31 @@ def test_page_options_and_unknown_routes(idle: TestClient) -> None:
     assert r.status_code == 404 and "error" in r.json()
 
 
+def test_options_carry_peoples_words_for_the_optimizer_keys(idle: TestClient) -> None:
+    from saucerfab.labels import api_labels
+
+    labels = idle.get("/api/options").json()["labels"]
+    assert labels == api_labels()  # the page reads the one table (saucerfab/labels.py), never a copy
+    assert labels["stages"]["bw_sigma_large"].startswith("Smooth shaping, coarse")
+    assert "E_barrier" in labels["hidden_energies"] and labels["energies"]["E_visual"] == "image error"
+
+
+def test_an_exports_check_summary_counts_the_findings(tmp_path: Path) -> None:
+    from saucerfab.studio.results import checks_summary
+
+    info = {"severity": "info", "code": "units", "message": "OBJ states no units", "where": None}
+    error = {"severity": "error", "code": "not_watertight", "message": "12 open edges", "where": None}
+    (tmp_path / "check.json").write_text(json.dumps({"schema": "saucerfab.check/1", "files": [
+        {"path": "saucer.obj", "verdict": "printable", "findings": [info, info]},
+        {"path": "saucer.3mf", "verdict": "not printable", "findings": [error]},
+    ]}))
+    obj, three_mf = checks_summary(tmp_path)
+    assert obj["printable"] and obj["counts"] == {"error": 0, "warning": 0, "info": 2}
+    assert obj["counts_text"] == "0 errors, 0 warnings, 2 info findings"  # as the print's report.html says it
+    assert not three_mf["printable"] and three_mf["counts_text"] == "1 error, 0 warnings, 0 info findings"
+    assert three_mf["findings"] == [{"code": "not_watertight", "severity": "error", "message": "12 open edges"}]
+
+
 def test_bad_uploads_are_4xx_with_a_message(tmp_path: Path) -> None:
     client = TestClient(create_app(tmp_path / "ws", max_upload_bytes=100_000), base_url=LOCAL)
     cases = [

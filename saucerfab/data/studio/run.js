@@ -35,6 +35,15 @@ export function human(text) {
   return String(text ?? "").replace(/_/g, " ");
 }
 
+/** People's words for the optimizer's keys (GET /api/options' `labels`, saucerfab/labels.py); set once at start. */
+const LABELS = { stages: {}, energies: {}, hidden_energies: [], stop_reasons: {} };
+export function setLabels(labels) {
+  Object.assign(LABELS, labels ?? {});
+}
+const stageText = (name) => LABELS.stages[name] ?? human(name);
+const energyText = (key) => LABELS.energies[key] ?? human(String(key ?? "").replace(/^E_/, ""));
+const stopText = (reason) => LABELS.stop_reasons[reason] ?? human(reason);
+
 function seconds(s) {
   if (s === null || s === undefined || !Number.isFinite(s)) return "";
   const whole = Math.round(s);
@@ -45,8 +54,9 @@ function seconds(s) {
 function number(v) {
   if (typeof v !== "number" || !Number.isFinite(v)) return String(v ?? "");
   const a = Math.abs(v);
-  if (a !== 0 && (a < 1e-3 || a >= 1e5)) return v.toExponential(3);
-  return Number(v.toPrecision(4)).toString();
+  if (a !== 0 && a < 1e-3) return v.toExponential(2);
+  // four significant digits, grouped: an image error of 369,700 rather than 3.697e+5
+  return Number(v.toPrecision(4)).toLocaleString("en", { maximumFractionDigits: 20 });
 }
 
 /** A captioned image; keeps the <img> (and so its pixels) when only the caption changes. */
@@ -147,11 +157,12 @@ export class RunView {
       stage = "Checking the design: a trial export, ray-traced (verify)";
       fraction = 1;
     } else if (!p.stage) {
-      stage = "Reading the pictures and preparing the first look…";
+      // the first look comes before the first stage reports: once it is shown, say what comes next
+      stage = p.looks ? `First look ready; stage 1 of ${stages} is starting…` : "Reading the pictures and preparing the first look…";
     } else if (stageDone) {
-      stage = `Stage ${Math.min(index, stages)} of ${stages} (${human(p.stage)}) finished`;
+      stage = `Stage ${Math.min(index, stages)} of ${stages} (${stageText(p.stage)}) finished`;
     } else {
-      stage = `Stage ${Math.min(index + 1, stages)} of ${stages}: ${human(p.stage)}`;
+      stage = `Stage ${Math.min(index + 1, stages)} of ${stages}: ${stageText(p.stage)}`;
       if (p.max_iterations) stage += `, iteration ${p.iteration ?? 0} of ${p.max_iterations}`;
     }
     fraction = Math.min(1, fraction);
@@ -163,8 +174,9 @@ export class RunView {
     const dl = $("#progress-energies");
     dl.replaceChildren();
     for (const [k, v] of Object.entries(p.energies ?? {})) {
+      if (LABELS.hidden_energies.includes(k)) continue; // a barrier's logarithms say nothing to a person
       const dt = document.createElement("dt");
-      dt.textContent = k.replace(/^E_/, "E ").replace(/_/g, " ");
+      dt.textContent = energyText(k);
       const dd = document.createElement("dd");
       dd.textContent = number(v);
       dl.append(dt, dd);
@@ -175,7 +187,7 @@ export class RunView {
   looks(looks) {
     const gallery = $("#looks-gallery");
     $("#looks").hidden = false;
-    $("#looks-title").textContent = looks.stage === "first_look" ? "First look (the base shape, coloured from the pictures)" : `Preview after ${human(looks.stage)}`;
+    $("#looks-title").textContent = looks.stage === "first_look" ? "First look (the base shape, coloured from the pictures)" : `Preview after: ${stageText(looks.stage)}`;
     for (const view of ["composite", "direct", "reflected", "reflected2"]) {
       const path = looks.files[view];
       if (path) figure(gallery, view, runFileUrl(this.runId, path), VIEW_TEXT[view] ?? human(view));
@@ -240,9 +252,9 @@ const PRINT_SUFFIX = /\.(3mf|obj|mtl|glb|gltf|ply|wrl|stl|zip)$/i;
 
 /** Plain words for the design's summary numbers (results.metrics). */
 const METRIC_TEXT = {
-  E_visual_final: ["image error (E visual)", (v) => number(v)],
-  max_abs_height_change: ["largest height change", (v) => number(v)],
-  total_s: ["design time", (v) => seconds(v)],
+  E_visual_final: [() => `${energyText("E_visual")} at the end`, (v) => number(v)],
+  max_abs_height_change: [() => "largest height change", (v) => number(v)],
+  total_s: [() => "design time", (v) => seconds(v)],
 };
 
 function metricsList(dl, metrics, enhancement) {
@@ -250,8 +262,8 @@ function metricsList(dl, metrics, enhancement) {
   const add = (k, v) => dl.append(el("dt", "", k), el("dd", "", v));
   for (const [k, v] of Object.entries(metrics)) {
     if (typeof v !== "number" && typeof v !== "string") continue;
-    const [label, fmt] = METRIC_TEXT[k] ?? [human(k), (x) => (typeof x === "number" ? number(x) : String(x))];
-    add(label, fmt(v));
+    const [label, fmt] = METRIC_TEXT[k] ?? [() => human(k), (x) => (typeof x === "number" ? number(x) : String(x))];
+    add(label(), fmt(v));
   }
   const p = $("#enhancement-note");
   // results.enhancement: design.json's parameters.enhancement_used ({asked, strategy, why}) or a word
@@ -266,16 +278,16 @@ function stagesTable(box, stages) {
   if (!stages.length) return;
   const table = el("table", "verify stages");
   const head = el("tr");
-  for (const h of ["stage", "iterations", "E visual", "E deform", "stopped"]) head.append(el("th", "", h));
+  for (const h of ["stage", "iterations", energyText("E_visual"), energyText("E_deform"), "stopped"]) head.append(el("th", "", h));
   table.append(head);
   for (const st of stages) {
     const tr = el("tr");
     tr.append(
-      el("td", "", human(st.name)),
+      el("td", "", stageText(st.name)),
       el("td", "num", st.iterations ?? ""),
       el("td", "num", st.E_visual != null ? number(st.E_visual) : ""),
       el("td", "num", st.E_deform != null ? number(st.E_deform) : ""),
-      el("td", "", human(st.stop_reason ?? "")),
+      el("td", "", st.stop_reason ? stopText(st.stop_reason) : ""),
     );
     table.append(tr);
   }
@@ -351,6 +363,8 @@ function findingsList(check) {
   for (const [file, c] of entries) {
     const li = el("li", c.printable === false ? "bad" : "ok");
     li.append(el("strong", "", file), el("span", "", c.printable === false ? " not printable" : " printable"));
+    // the check's counts, as the print's report says them ("0 errors, 0 warnings, 1 info finding")
+    if (c.counts_text) li.append(el("span", "help", ` (${c.counts_text})`));
     const findings = (c.findings ?? []).filter((f) => f.severity !== "info" || (c.findings ?? []).length < 6);
     if (findings.length) {
       const inner = el("ul");

@@ -8,7 +8,7 @@
 
 import { getJSON, postJSON, request, watchRun, FINAL } from "./api.js";
 import { DesignForm } from "./form.js";
-import { RunView, setPrinters, startExport } from "./run.js";
+import { RunView, setLabels, setPrinters, startExport } from "./run.js";
 import { renderHistory } from "./history.js";
 
 const $ = (sel, root = document) => root.querySelector(sel);
@@ -290,6 +290,7 @@ async function main() {
   state.form = new DesignForm(state.options, { onError: formError, onPicturesChanged: showWelcome });
   fillExportControls(state.options);
   setPrinters(state.options.printers);
+  setLabels(state.options.labels);
   $("#design-form").addEventListener("submit", startDesign);
   wireRunButtons();
   showWelcome();
