@@ -37,6 +37,7 @@ from saucerfab import __version__
 from saucerfab.design import Design, FaceView, save_design
 from saucerfab.errors import ConfigError, Interrupted, OutputError
 from saucerfab.fileio import write_bytes_atomic
+from saucerfab.optimize.diagnose import check_base_shape, conflict_share
 from saucerfab.optimize.energies import WEIGHTS
 from saucerfab.optimize.looks import Look, Looks
 from saucerfab.optimize.prepare import Prepared, prepare
@@ -231,6 +232,7 @@ def run_design(
 
     torch.manual_seed(request.seed)
     rig = Rig(prep.scene, prep.base, reflected_groups=prep.reflected_groups)
+    shape_check = check_base_shape(prep, rig, request.shape, request.seed)  # a note now if the shape defeats the method
     # --eyes: one rig per eye, each with its own reflection (the design eye's is ``rig``)
     spec = request.eye_spec()
     eyes = [] if spec.mode == "design" else eye_rigs(prep.scene, prep.base, spec, prep.reflected_groups,
@@ -272,6 +274,7 @@ def run_design(
 
     design, previews, energy_log = loop.finish(h, c)
     metrics = loop.metrics
+    metrics["base_shape"] = shape_check.conclude(metrics["face_views"])  # with the hint where it is the cause
     # total_s: the whole design, earlier interrupted runs included (up to their checkpoint)
     metrics["total_s"] = earlier_s + time.perf_counter() - t_start
     if resumed is not None:
@@ -522,7 +525,6 @@ class _StageLoop:
                 file=sys.stderr,
             )
         face_view = classify_faces(visible_faces(rig, h.numpy().reshape(rig.n, rig.n)))
-        seen = (face_view != FaceView.NEITHER).sum()
         with torch.no_grad():
             ev_t = e_visual(rig.render(h, c, spec.sigma), target_list)
             ev = float(ev_t)
@@ -549,8 +551,7 @@ class _StageLoop:
                 "E_visual": ev,
                 **eyes_part,
                 **reported,
-                # share of the seen faces seen both directly and in a reflection
-                "conflict_fraction": float((face_view == FaceView.BOTH).sum() / max(seen, 1)),
+                "conflict_fraction": conflict_share(face_view),
                 "max_abs_height_change": float((h - self.z).abs().max()),
             }
         )
