@@ -73,7 +73,7 @@ class Payload:
     kind: str
     files: dict[str, bytes]
     printer: Any  # PrinterProfile (kept Any so this module imports without the profiles)
-    cup_diameter_mm: float
+    cup_diameter_mm: float | None  # None: the scene's (a design folder's own)
     formats: tuple[str, ...]
     request: dict[str, Any] = field(default_factory=dict)
     export_options: dict[str, Any] = field(default_factory=dict)
@@ -207,7 +207,8 @@ def job_key(job: JobSpec, files: dict[str, bytes], profile: Any) -> str:
         "kind": job.kind,
         "inputs": {rel: hashlib.sha256(data).hexdigest() for rel, data in sorted(files.items())},
         "printer": _profile_data(profile),
-        "cup_diameter_mm": float(job.cup_diameter_mm),
+        # None (the scene's) is the value of input files hashed above, or of the version's preset
+        "cup_diameter_mm": None if job.cup_diameter_mm is None else float(job.cup_diameter_mm),
         "formats": list(resolve_formats(job, profile)),
         "shape": job.shape,
         "scene": job.scene,
@@ -234,9 +235,18 @@ def load_payload(
     """
     from saucerfab.profiles import load_profile
 
+    printer = job.printer
     try:
-        profile = load_profile(job.printer)
         files = read_inputs(job, root)
+        if printer is None:  # a design folder's job without one: the printer the design was made for
+            printer = design_printer(_json_or_none(files.get("design/design.json", b"")))
+        try:
+            profile = load_profile(printer)
+        except SaucerfabError as exc:
+            if job.printer is not None:
+                raise
+            raise type(exc)(f"{exc} (the printer the design folder's design.json names; "
+                            "give the job a 'printer')") from None
     except SaucerfabError as exc:  # name files as the manifest does, relative to its folder
         exc.args = (str(exc).replace(str(root.resolve()) + os.sep, ""),)
         raise
@@ -256,16 +266,16 @@ def load_payload(
         request["scene"] = by_role.get("scene", job.scene)
         if job.cup:
             request["cup"] = job.cup
-        # the design is made for the printer and cup the job exports for
-        request["printer"] = job.printer
-        request["cup_diameter_mm"] = float(job.cup_diameter_mm)
+        # the design is made for the printer and cup the job exports for (None: the scene's)
+        request["printer"] = printer
+        request["cup_diameter_mm"] = job.cup_diameter_mm
     return Payload(
         job_id=job.id,
         key=key,
         kind=job.kind,
         files=files,
         printer=profile,
-        cup_diameter_mm=float(job.cup_diameter_mm),
+        cup_diameter_mm=job.cup_diameter_mm,
         formats=resolve_formats(job, profile),
         request=request,
         export_options=dict(job.export_options),
@@ -274,6 +284,31 @@ def load_payload(
         event_topic=event_topic,
         sources=sources,
     )
+
+
+def design_printer(design_json: Any) -> str:
+    """The printer a design was made for, from its design.json (given parsed): ``parameters.printer``
+    (as ``saucerfab design --printer`` was given), else ``parameters.print_target.printer``, else
+    :data:`~saucerfab.profiles.DEFAULT_PRINTER` (a synthetic design, one older than the print
+    target, or an unreadable design.json: the export then says what is wrong with the folder).
+
+    The printer a job with a design folder and no ``printer`` exports for: the rule of
+    ``saucerfab export`` without ``--printer`` (``saucerfab.fabricate.pipeline.export_printer``),
+    read from design.json alone, since the driver does not load a job's design.
+    """
+    from saucerfab.fabricate.pipeline import printer_made_for
+    from saucerfab.profiles import DEFAULT_PRINTER
+
+    made = printer_made_for(design_json.get("parameters") if isinstance(design_json, dict) else None)
+    return DEFAULT_PRINTER if made is None else made
+
+
+def _json_or_none(data: bytes) -> Any:
+    """``data`` parsed as JSON, or None when it is not JSON."""
+    try:
+        return json.loads(data)
+    except (ValueError, RecursionError):
+        return None
 
 
 def _shown(path: Path, root: Path) -> str:

@@ -3,7 +3,8 @@
 A manifest is a TOML or a CSV file (chosen by its suffix). Each job has an
 ``id``, either a finished design folder (``design``) or the raw inputs of a
 design run (``direct`` + ``reflected`` images, a ``shape``, a ``scene``...),
-a ``printer`` profile, a ``cup_diameter_mm``, the export ``formats`` and
+a ``printer`` profile, a ``cup_diameter_mm`` (both optional: left out, they
+default as ``saucerfab design`` / ``saucerfab export`` default them), the export ``formats`` and
 optional per-job overrides (``design_options`` for the design run,
 ``export_options`` for the export).
 
@@ -36,34 +37,50 @@ spaces or ``;``, and ``design_options`` / ``export_options`` hold
 are comments.
 
 Paths are relative to the manifest's folder and must stay inside it (after
-resolving ``..`` and symbolic links); absolute paths are refused. A manifest
-with a structural mistake (bad syntax, nesting over :data:`MAX_NESTING` deep,
-unknown key, duplicate id, an id the batch's own files use, a bad option
-value, a path leaving the folder) is refused as a whole, with every problem
-listed, before any work starts; option values are judged by the rules
-``saucerfab design`` applies before its work (:func:`_check_design_options`).
-A job whose files are missing or unreadable fails on its own when the batch
-runs.
+resolving ``..`` and symbolic links); absolute paths are refused.
+
+Checked when the manifest loads, before any work starts: syntax (alone, nothing
+more can be read), nesting over :data:`~saucerfab.batch.manifest_lines.MAX_NESTING` deep, unknown keys or
+columns, ids (valid, unique, not a name the batch writes), option names and
+values (by the rules ``saucerfab design`` and ``export`` apply before their
+work: :func:`_check_design_options`), formats, printer keys, paths leaving the
+folder, and that every input file or design folder exists and can be read. A
+manifest with any problem is refused as a whole, with every problem listed as
+``m.toml:12: job 'id': ...`` (file and line: :mod:`saucerfab.batch.manifest_lines`).
+What the files hold (a broken image, a bad design folder) is read when the
+job runs: such a job fails on its own, and the others go on.
 """
 
 from __future__ import annotations
 
-import csv
 import functools
-import io
 import json
 import os
 import re
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from saucerfab.batch.manifest_lines import (
+    Problems,
+    Report,
+    Row,
+    MAX_NESTING,
+    TomlLines,
+    csv_records,
+    input_problem,
+    job_label,
+    nesting_depth,
+    read_manifest_text,
+    reporter,
+    resolve_inside,
+    toml_loads,
+)
 from saucerfab.errors import ConfigError
 from saucerfab.optimize.request import IMAGE_ROLES, DesignRequest
 
-#: largest manifest file accepted (a manifest is text listing jobs)
-MAX_MANIFEST_BYTES = 16 * 1024 * 1024
 #: most jobs in one manifest
 MAX_JOBS = 100_000
 #: job ids name output folders: letters, digits, '.', '_', '-' (matched with
@@ -72,10 +89,6 @@ ID_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,79}")
 #: names Windows keeps for devices, with or without an extension: no file or folder can have them
 WINDOWS_DEVICES = frozenset({"CON", "PRN", "AUX", "NUL", "CONIN$", "CONOUT$",
                              *(f"{p}{i}" for p in ("COM", "LPT") for i in (*range(1, 10), "\u00b9", "\u00b2", "\u00b3"))})
-#: deepest nesting of arrays and tables a manifest may hold; a manifest needs 5
-#: (the document, ``[[job]]``, a job, its ``design_options``, a list in it), and
-#: neither the parser nor any later walk of the data may run out of stack
-MAX_NESTING = 32
 
 #: what the batch itself writes in its output folder (saucerfab.batch.report, saucerfab.batch.runner)
 JSON_NAME = "batch-report.json"
@@ -125,8 +138,11 @@ class JobSpec:
 
     Attributes:
         id: unique name; also the name of the job's output folder.
-        printer: a profile key (``j55``) or the absolute path of a profile TOML.
-        cup_diameter_mm: physical cup width the print is scaled to.
+        printer: a profile key (``j55``) or the absolute path of a profile TOML; None (a
+            design folder's job without one): the printer the design was made for
+            (:func:`saucerfab.batch.jobs.design_printer`), as ``saucerfab export``.
+        cup_diameter_mm: physical cup width the print is scaled to, mm; None: the
+            scene's (a design folder's own), as ``saucerfab design`` and ``export``.
         formats: export formats; empty means the printer's preferred format.
         design: a finished design folder, or None for a raw-input job.
         files: input files of a raw-input job by role (``direct``, ``reflected``,
@@ -136,12 +152,12 @@ class JobSpec:
         cup: cup spec overriding the scene's (``circle:0.4``...), or None.
         design_options: DesignRequest fields overridden for this job.
         export_options: options passed to the export for this job.
-        source: where the job is written (``manifest.toml job #3``), for messages.
+        source: where the job is written (``manifest.toml:12``), for messages.
     """
 
     id: str
-    printer: str
-    cup_diameter_mm: float
+    printer: str | None
+    cup_diameter_mm: float | None
     formats: tuple[str, ...] = ()
     design: Path | None = None
     files: dict[str, Path] = field(default_factory=dict)
@@ -173,31 +189,6 @@ class Manifest:
         raise KeyError(job_id)
 
 
-def resolve_inside(root: Path, value: Any, where: str) -> Path:
-    """``value`` (a relative path string) resolved against ``root``; refuse escapes.
-
-    Raises:
-        ConfigError: not a string, absolute, or resolving (``..``, symlinks) outside ``root``.
-    """
-    if not isinstance(value, str) or not value.strip():
-        raise ConfigError(f"{where}: expected a relative path (a non-empty string), got {value!r}")
-    p = Path(value)
-    if p.is_absolute() or value.startswith(("/", "\\")) or re.match(r"^[A-Za-z]:", value):
-        raise ConfigError(
-            f"{where}: {value!r} is an absolute path; paths in a manifest are relative to its "
-            f"folder {str(root)!r} and must stay inside it: move the file there and give it relative"
-        )
-    root_real = root.resolve()
-    full = (root_real / p).resolve()
-    if not full.is_relative_to(root_real):
-        raise ConfigError(
-            f"{where}: {value!r} resolves to {str(full)!r}, outside the manifest's folder "
-            f"{str(root_real)!r}; manifest paths may not leave that folder (no '..' or links out): "
-            "copy the file under it"
-        )
-    return full
-
-
 def _looks_like_path(value: str, suffixes: tuple[str, ...]) -> bool:
     return "/" in value or "\\" in value or value.lower().endswith(suffixes)
 
@@ -213,137 +204,191 @@ def _options(value: Any, where: str) -> dict[str, Any]:
     return dict(value)
 
 
-def _build_job(raw: dict[str, Any], root: Path, where: str) -> JobSpec:
-    """A :class:`JobSpec` from one job's plain data (defaults merged already)."""
-    from saucerfab.formats import FORMATS, WRITERS, lookup
-    from saucerfab.scene import PRESETS
-
-    unknown = set(raw) - JOB_KEYS
-    if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {sorted(unknown)}; allowed: {sorted(JOB_KEYS)}")
-    job_id = raw.get("id")
+def id_problem(job_id: Any) -> str | None:
+    """Why ``job_id`` cannot be a job's id (it names the job's output folder), or None."""
     if not isinstance(job_id, str) or not ID_RE.fullmatch(job_id):
-        raise ConfigError(
-            f"{where}: id {job_id!r} is missing or not a valid name; use 1-80 letters, digits, "
-            "'.', '_' or '-', starting with a letter or digit (it names the job's output folder)"
-        )
+        return (f"id {job_id!r} is missing or not a valid name; use 1-80 letters, digits, '.', '_' or '-', "
+                "starting with a letter or digit (it names the job's output folder)")
     reserved = reserved_names()
     # case-insensitively: on macOS and Windows disks 'Batch-Report.JSON' is the report
     if job_id.casefold() in {n.casefold() for n in reserved}:
-        raise ConfigError(
-            f"{where}: id {job_id!r} is the name of a file the batch writes in its output folder "
-            f"(reserved: {', '.join(sorted(reserved))}); give the job another id"
-        )
+        return (f"id {job_id!r} is the name of a file the batch writes in its output folder "
+                f"(reserved: {', '.join(sorted(reserved))}); give the job another id")
     if job_id.split(".")[0].upper() in WINDOWS_DEVICES or job_id.endswith("."):
         # a folder named CON, nul.txt or 'job.' cannot be made on Windows (a bureau's share, say): refuse
         # it on every system, so a manifest runs the same everywhere
-        raise ConfigError(f"{where}: id {job_id!r} cannot name a folder on Windows (a device name such as CON, "
-                          "NUL, COM1 or LPT1, or a trailing '.'); give the job another id")
-    where = f"{where} (id {job_id!r})"
+        return (f"id {job_id!r} cannot name a folder on Windows (a device name such as CON, "
+                "NUL, COM1 or LPT1, or a trailing '.'); give the job another id")
+    return None
 
-    printer = raw.get("printer")
-    if not isinstance(printer, str) or not printer.strip():
-        raise ConfigError(f"{where}: 'printer' is required: a profile key (see 'saucerfab printers') or a .toml file")
-    if _looks_like_path(printer, (".toml",)):
-        printer = str(resolve_inside(root, printer, f"{where} printer"))
 
-    cup_mm = raw.get("cup_diameter_mm")
+def _build_job(
+    raw: dict[str, Any], root: Path, report: Report, printer_problem: Callable[[str], str | None], source: str
+) -> JobSpec | None:
+    """A :class:`JobSpec` from one job's plain data (defaults merged already), or None.
+
+    Every problem is passed to ``report``, as many as the job has (one mistake
+    does not hide the next); the job is None when there was any.
+    ``printer_problem`` judges a printer key (cached per manifest).
+    """
+    from saucerfab.formats import FORMATS, WRITERS, lookup
+    from saucerfab.scene import PRESETS
+
+    found: list[str] = []
+
+    def bad(key: str | None, message: str) -> None:
+        found.append(message)
+        report(key, message)
+
+    def inside(key: str, value: Any) -> Path | None:
+        """``value``, the path of input ``key``, resolved in the folder and checked to exist."""
+        try:
+            path = resolve_inside(root, value, key)
+        except ConfigError as exc:
+            bad(key, str(exc))
+            return None
+        problem = input_problem(path, value, key)
+        if problem is not None:
+            bad(key, problem)
+            return None
+        return path
+
+    unknown = sorted(set(raw) - JOB_KEYS)
+    if unknown:
+        bad(unknown[0], f"unknown key(s) {unknown}; allowed: {sorted(JOB_KEYS)}")
+    job_id = raw.get("id")
+    problem = id_problem(job_id)
+    if problem is not None:
+        bad("id", problem)
+
+    has_design = raw.get("design") not in (None, "")
+    # left out: 'saucerfab design's printer for a design run; for a design folder, the printer it
+    # was made for, which only its design.json knows (read when the job runs: jobs.design_printer)
+    printer = raw.get("printer", None if has_design else DesignRequest.default("printer"))
+    if printer is not None:
+        if not isinstance(printer, str) or not printer.strip():
+            bad("printer", f"'printer' must be a profile key (see 'saucerfab printers') or a .toml file, got "
+                f"{printer!r}; leave it out for the default")
+        elif _looks_like_path(printer, (".toml",)):
+            path = inside("printer", printer)
+            printer = None if path is None else str(path)
+        elif (problem := printer_problem(printer)) is not None:
+            bad("printer", problem)
+
+    cup_mm = raw.get("cup_diameter_mm")  # left out: the scene's (a design folder's own), as design and export do
     if isinstance(cup_mm, str):
         try:
             cup_mm = float(cup_mm)
         except ValueError:
             pass
-    if isinstance(cup_mm, bool) or not isinstance(cup_mm, (int, float)) or not (0 < cup_mm < 10_000):
-        raise ConfigError(f"{where}: 'cup_diameter_mm' is required, a positive number of millimetres; got {cup_mm!r}")
+    if cup_mm is not None and (
+        isinstance(cup_mm, bool) or not isinstance(cup_mm, (int, float)) or not (0 < cup_mm < 10_000)
+    ):
+        bad("cup_diameter_mm", f"'cup_diameter_mm' must be a positive number of millimetres, got {cup_mm!r}; "
+            "leave it out for the scene's (a design folder's own)")
 
     formats_raw = raw.get("formats", ())
     if isinstance(formats_raw, str):
         formats_raw = [f for f in re.split(r"[\s;,|]+", formats_raw) if f]
+    formats: tuple[str, ...] = ()
     if not isinstance(formats_raw, (list, tuple)) or not all(isinstance(f, str) for f in formats_raw):
-        raise ConfigError(f"{where}: 'formats' must be a list of format names, got {formats_raw!r}")
-    # a name --formats takes (any case, a leading dot, an alias such as vrml) is the same here
-    named = [(f, lookup(f)) for f in formats_raw]
-    bad = [f for f, fmt in named if fmt is None or fmt.key not in WRITERS]
-    if bad:
-        raise ConfigError(f"{where}: unknown format(s) {bad}; known: {list(FORMATS)}")
-    formats = tuple(dict.fromkeys(fmt.key for _, fmt in named if fmt is not None))
+        bad("formats", f"'formats' must be a list of format names, got {formats_raw!r}")
+    else:
+        # a name --formats takes (any case, a leading dot, an alias such as vrml) is the same here
+        named = [(f, lookup(f)) for f in formats_raw]
+        unknown = [f for f, fmt in named if fmt is None or fmt.key not in WRITERS]
+        if unknown:
+            bad("formats", f"unknown format(s) {unknown}; known: {list(FORMATS)}")
+        formats = tuple(dict.fromkeys(fmt.key for _, fmt in named if fmt is not None))
 
-    has_design = raw.get("design") not in (None, "")
     has_raw = any(raw.get(k) not in (None, "") for k in (*IMAGE_ROLES, "shape", "scene", "cup"))
-    design_options = _options(raw.get("design_options"), f"{where} design_options")
-    export_options = _options(raw.get("export_options"), f"{where} export_options")
+    options: dict[str, dict[str, Any]] = {}
+    for k in ("design_options", "export_options"):
+        try:
+            options[k] = _options(raw.get(k), k)
+        except ConfigError as exc:
+            bad(k, str(exc))
+            options[k] = {}
+    design_options, export_options = options["design_options"], options["export_options"]
+    try:
+        _check_export_options(export_options)
+    except ConfigError as exc:
+        bad("export_options", str(exc))
     if has_design and (has_raw or design_options):
-        raise ConfigError(
-            f"{where}: give either a design folder ('design') or the inputs of a design run "
-            "(direct, reflected, shape, scene, cup, design_options), not both"
-        )
-    _check_export_options(export_options, where)
+        bad("design", "give either a design folder ('design') or the inputs of a design run "
+            "(direct, reflected, shape, scene, cup, design_options), not both")
+        return None
     common = dict(
         id=job_id,
         printer=printer,
-        cup_diameter_mm=float(cup_mm),
+        cup_diameter_mm=None if cup_mm is None else float(cup_mm),
         formats=formats,
         export_options=export_options,
-        source=where,
+        source=source,
     )
     if has_design:
-        return JobSpec(design=resolve_inside(root, raw["design"], f"{where} design"), **common)  # type: ignore[arg-type]
+        design = inside("design", raw["design"])
+        return None if found else JobSpec(design=design, **common)  # type: ignore[arg-type]
 
     missing = [k for k in ("direct", "reflected") if raw.get(k) in (None, "")]
     if missing:
-        raise ConfigError(
-            f"{where}: a job needs a design folder ('design') or both images of a design run; "
-            f"missing {missing}"
-        )
+        bad(None, f"a job needs a design folder ('design') or both images of a design run; missing {missing}")
     files: dict[str, Path] = {}
     for k in IMAGE_ROLES:
-        if raw.get(k) not in (None, ""):
-            files[k] = resolve_inside(root, raw[k], f"{where} {k}")
+        if raw.get(k) not in (None, "") and (path := inside(k, raw[k])) is not None:
+            files[k] = path
     shape = raw.get("shape", DesignRequest.default("shape"))
     scene = raw.get("scene", DesignRequest.default("scene"))
+    shape_name: str | None = None
     if not isinstance(shape, str) or not shape:
-        raise ConfigError(f"{where}: 'shape' must be a built-in shape name or a .png/.npy file, got {shape!r}")
-    if not isinstance(scene, str) or not scene:
-        raise ConfigError(f"{where}: 'scene' must be a preset name or a .toml file, got {scene!r}")
-    shape_name: str | None = shape
-    if _looks_like_path(shape, SHAPE_SUFFIXES):
-        files["shape"] = resolve_inside(root, shape, f"{where} shape")
-        shape_name = None
+        bad("shape", f"'shape' must be a built-in shape name or a .png/.npy file, got {shape!r}")
+    elif _looks_like_path(shape, SHAPE_SUFFIXES):
+        if (path := inside("shape", shape)) is not None:
+            files["shape"] = path
     else:
         from saucerfab.heightfield import BASE_SHAPES
 
+        shape_name = shape
         if shape.replace("-", "_").lower() not in BASE_SHAPES:
-            raise ConfigError(
-                f"{where}: unknown base shape {shape!r}; built-in: {sorted(BASE_SHAPES)}, or a .png/.npy file"
-            )
-    scene_name: str | None = scene
-    if scene not in PRESETS:
-        if not _looks_like_path(scene, (".toml",)):
-            raise ConfigError(f"{where}: scene {scene!r} is neither a preset {sorted(PRESETS)} nor a .toml file")
-        files["scene"] = resolve_inside(root, scene, f"{where} scene")
-        scene_name = None
+            bad("shape", f"unknown base shape {shape!r}; built-in: {sorted(BASE_SHAPES)}, or a .png/.npy file")
+    scene_name: str | None = None
+    if not isinstance(scene, str) or not scene:
+        bad("scene", f"'scene' must be a preset name or a .toml file, got {scene!r}")
+    elif scene in PRESETS:
+        scene_name = scene
+    elif not _looks_like_path(scene, (".toml",)):
+        bad("scene", f"scene {scene!r} is neither a preset {sorted(PRESETS)} nor a .toml file")
+    elif (path := inside("scene", scene)) is not None:
+        files["scene"] = path
     cup = raw.get("cup")
     if cup is not None and (not isinstance(cup, str) or not cup):
-        raise ConfigError(f"{where}: 'cup' must be a cup spec like 'circle:0.4', got {cup!r}")
-    if cup:
+        bad("cup", f"'cup' must be a cup spec like 'circle:0.4', got {cup!r}")
+        cup = None
+    elif cup is not None:
         from saucerfab.scene import parse_cup_spec
 
         try:
             parse_cup_spec(cup)
         except ConfigError as exc:
-            raise ConfigError(f"{where}: {exc}") from None
+            bad("cup", str(exc))
+            cup = None
     allowed = design_option_keys()
     unknown_opts = set(design_options) - allowed
     if unknown_opts:
-        raise ConfigError(
-            f"{where}: unknown design option(s) {sorted(unknown_opts)}; allowed: {sorted(allowed)}"
-        )
-    _check_design_options(design_options, files, scene_name, cup or None, where)
+        bad("design_options", f"unknown design option(s) {sorted(unknown_opts)}; allowed: {sorted(allowed)}")
+    else:
+        try:  # placeholders for images with a problem of their own: only the options are judged here
+            images = {k: files.get(k, Path(k)) for k in ("direct", "reflected")}
+            _check_design_options(design_options, images, scene_name, cup)
+        except ConfigError as exc:
+            bad("design_options", str(exc))
+    if found:
+        return None
     return JobSpec(
         files=files,
         shape=shape_name,
         scene=scene_name,
-        cup=cup or None,
+        cup=cup,
         design_options=design_options,
         **common,  # type: ignore[arg-type]
     )
@@ -387,7 +432,7 @@ def _request_hints() -> dict[str, Any]:
 
 
 def _check_design_options(
-    options: dict[str, Any], files: dict[str, Path], scene: str | None, cup: str | None, where: str
+    options: dict[str, Any], files: dict[str, Path], scene: str | None, cup: str | None
 ) -> None:
     """Refuse, at load, every design option value ``saucerfab design`` would refuse before its work.
 
@@ -401,21 +446,27 @@ def _check_design_options(
     the paper preset's scene (the ranges do not depend on the scene) and
     its cup with the scene file when the job runs: the file is the job's
     input, read when the job runs, not when the manifest loads.
+
+    Raises:
+        ConfigError: ``design_options: ...``, every mistyped option at once, else the first refused value.
     """
     from saucerfab.errors import SaucerfabError
     from saucerfab.heightfield import check_height_scale
     hints = _request_hints()
-    for name, value in sorted(options.items()):
-        want = _type_problem(value, hints.get(name))
-        if want is not None:
-            raise ConfigError(f"{where} design_options: {name} must be {want}, got {value!r}")
+    mistyped = [
+        f"{name} must be {want}, got {value!r}"
+        for name, value in sorted(options.items())
+        if (want := _type_problem(value, hints.get(name))) is not None
+    ]
+    if mistyped:
+        raise ConfigError("design_options: " + "; ".join(mistyped))
     try:
         request = DesignRequest(direct=files["direct"], reflected=files["reflected"], **options)
         check_height_scale(request.height_scale)
     except SaucerfabError as exc:
-        raise ConfigError(f"{where} design_options: {exc}") from None
+        raise ConfigError(f"design_options: {exc}") from None
     except TypeError as exc:
-        raise ConfigError(f"{where} design_options: {exc}") from None
+        raise ConfigError(f"design_options: {exc}") from None
     scene, cup = (scene, cup) if scene is not None else ("paper", None)
     try:
         key = json.dumps(options, sort_keys=True)
@@ -424,7 +475,7 @@ def _check_design_options(
     else:
         problem = _scene_problem_cached(scene, cup, key)
     if problem is not None:
-        raise ConfigError(f"{where} design_options: {problem}")
+        raise ConfigError(f"design_options: {problem}")
 
 
 def _scene_problem(scene: str, cup: str | None, options: dict[str, Any]) -> str | None:
@@ -456,17 +507,18 @@ def export_option_keys() -> frozenset[str]:
     return frozenset(f.name for f in fields(FabOptions) if f.init)
 
 
-def _check_export_options(options: dict[str, Any], where: str) -> None:
+def _check_export_options(options: dict[str, Any]) -> None:
+    """Refuse export options ``saucerfab export`` would refuse (unknown names, bad values)."""
     from saucerfab.fabricate.options import FabOptions
 
     allowed = export_option_keys()
     unknown = set(options) - allowed
     if unknown:
-        raise ConfigError(f"{where}: unknown export option(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+        raise ConfigError(f"unknown export option(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
     try:
         FabOptions(**options)
     except (ConfigError, TypeError) as exc:
-        raise ConfigError(f"{where} export_options: {exc}") from None
+        raise ConfigError(f"export_options: {exc}") from None
 
 
 def _merge(defaults: dict[str, Any], job: dict[str, Any]) -> dict[str, Any]:
@@ -485,80 +537,33 @@ def _merge(defaults: dict[str, Any], job: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _read_text(path: Path) -> str:
-    if not path.is_file():
-        raise ConfigError(f"manifest {str(path)!r} not found")
-    if path.stat().st_size > MAX_MANIFEST_BYTES:
-        raise ConfigError(f"manifest {str(path)!r} is over {MAX_MANIFEST_BYTES >> 20} MB; split it")
-    try:
-        return path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read manifest {str(path)!r}: {exc}") from None
-
-
-def nesting_depth(value: Any) -> int:
-    """How deeply arrays and tables nest in ``value`` (a scalar: 0), without recursion.
-
-    Counting stops past :data:`MAX_NESTING`, so the answer is at most one more.
-    """
-    deepest = 0
-    stack: list[tuple[Any, int]] = [(value, 0)]
-    while stack:
-        v, depth = stack.pop()
-        if isinstance(v, dict):
-            v = list(v.values())
-        if isinstance(v, (list, tuple)):
-            depth += 1
-            deepest = max(deepest, depth)
-            if depth <= MAX_NESTING:  # deeper is refused anyway: stop counting
-                stack.extend((x, depth) for x in v)
-    return deepest
-
-
-def _toml_loads(text: str, what: str) -> dict[str, Any]:
-    """``tomllib.loads`` with a syntax error, or nesting too deep, as a :class:`ConfigError`.
-
-    tomllib parses arrays and inline tables recursively: a file nesting a few
-    thousand of them exhausts the stack (RecursionError), which is the file's
-    fault, not a crash.
-    """
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{what} is not valid TOML: {exc}") from None
-    except RecursionError:
-        raise ConfigError(
-            f"{what} nests arrays or tables too deeply to be read; "
-            f"a manifest needs at most {MAX_NESTING} levels: remove the nesting"
-        ) from None
-    if nesting_depth(data) > MAX_NESTING:
-        raise ConfigError(
-            f"{what} nests arrays or tables over {MAX_NESTING} levels deep; a manifest needs "
-            "at most a few (a job's option table holds lists of numbers at most): remove the nesting"
-        )
-    return data
-
-
-def _toml_rows(path: Path, text: str) -> tuple[dict[str, Any], list[tuple[str, dict[str, Any]]]]:
-    data = _toml_loads(text, f"manifest {str(path)!r}")
-    unknown = set(data) - {"defaults", "job", "batch"}
+def _toml_rows(path: Path, text: str, problems: Problems) -> tuple[dict[str, Any], list[Row], TomlLines]:
+    """``[defaults]`` and the jobs of a TOML manifest; its structural mistakes go to ``problems``."""
+    data = toml_loads(text, f"manifest {str(path)!r}")
+    lines = TomlLines(text)
+    unknown = sorted(set(data) - {"defaults", "job", "batch"})
     if unknown:
-        raise ConfigError(
-            f"manifest {str(path)!r}: unknown top-level key(s) {sorted(unknown)}; "
-            "use [defaults], [[job]] (and optionally [batch] version = 1)"
-        )
+        problems.add(lines.top_keys.get(unknown[0]), "", f"unknown top-level key(s) {unknown}; "
+                     "use [defaults], [[job]] (and optionally [batch] version = 1)")
     batch = data.get("batch", {})
     if not isinstance(batch, dict) or set(batch) - {"version"} or batch.get("version", 1) != 1:
-        raise ConfigError(f"manifest {str(path)!r}: [batch] may only hold version = 1, got {batch!r}")
+        problems.add(lines.top_keys.get("batch"), "[batch]", f"may only hold version = 1, got {batch!r}")
     defaults = data.get("defaults", {})
     if not isinstance(defaults, dict):
-        raise ConfigError(f"manifest {str(path)!r}: [defaults] must be a table")
-    if "id" in defaults:
-        raise ConfigError(f"manifest {str(path)!r}: [defaults] cannot set 'id' (each job has its own)")
+        problems.add(lines.defaults(), "[defaults]", "must be a table of job keys ([defaults] then printer = ...)")
+        defaults = {}
+    defaults = dict(defaults)
+    if defaults.pop("id", None) is not None:
+        problems.add(lines.defaults("id"), "[defaults]", "cannot set 'id' (each job has its own): remove it")
+    unknown = sorted(set(defaults) - JOB_KEYS)
+    if unknown:  # listed once here, not once per job that inherits them
+        problems.add(lines.defaults(unknown[0]), "[defaults]", f"unknown key(s) {unknown}; allowed: {sorted(JOB_KEYS)}")
+        defaults = {k: v for k, v in defaults.items() if k in JOB_KEYS}
     jobs = data.get("job", [])
     if not isinstance(jobs, list) or not all(isinstance(j, dict) for j in jobs):
-        raise ConfigError(f"manifest {str(path)!r}: jobs are written as [[job]] tables")
-    return defaults, [(f"{path.name} job #{i + 1}", j) for i, j in enumerate(jobs)]
+        problems.add(lines.top_keys.get("job"), "", "jobs are written as [[job]] tables")
+        jobs = []
+    return defaults, [(functools.partial(lines.job, i, len(jobs)), j) for i, j in enumerate(jobs)], lines
 
 
 def parse_options_cell(cell: str, where: str) -> dict[str, Any]:
@@ -575,7 +580,7 @@ def parse_options_cell(cell: str, where: str) -> dict[str, Any]:
             out[k] = tomllib.loads(f"v = {v}")["v"]
         except tomllib.TOMLDecodeError:
             out[k] = v
-        except RecursionError:  # see _toml_loads
+        except RecursionError:  # see toml_loads
             raise ConfigError(f"{where}: the value of {k!r} nests arrays or tables too deeply to be read") from None
         if nesting_depth(out[k]) > MAX_NESTING:
             raise ConfigError(
@@ -584,31 +589,36 @@ def parse_options_cell(cell: str, where: str) -> dict[str, Any]:
     return out
 
 
-def _csv_rows(path: Path, text: str) -> list[tuple[str, dict[str, Any]]]:
-    lines = [ln for ln in text.splitlines() if not ln.lstrip().startswith("#")]
-    reader = csv.DictReader(io.StringIO("\n".join(lines)), skipinitialspace=True)
-    if not reader.fieldnames:
+def _csv_rows(path: Path, text: str, problems: Problems) -> list[Row]:
+    """The jobs of a CSV manifest; its mistakes (columns, cells) go to ``problems``."""
+    records = (r for r in csv_records(text) if any(c.strip() for c in r[1]))  # blank lines say nothing
+    header_line, header = next(records, (0, []))
+    if not header:
         raise ConfigError(f"manifest {str(path)!r} is empty; the first row names the columns (id,design,...)")
-    header = [h.strip() for h in reader.fieldnames]
-    unknown = set(header) - JOB_KEYS
-    if unknown:
-        raise ConfigError(
-            f"manifest {str(path)!r}: unknown column(s) {sorted(unknown)}; allowed: {sorted(JOB_KEYS)}"
-        )
-    rows = []
-    for n, row in enumerate(reader, start=1):
-        where = f"{path.name} row {n}"
-        if None in row:
-            raise ConfigError(f"{where}: more cells than columns")
+    names = [h.strip() for h in header]
+    unknown = sorted(set(names) - JOB_KEYS)
+    if unknown:  # listed once, at the header; their cells are left out of every row
+        problems.add(header_line, "", f"unknown column(s) {unknown}; allowed: {sorted(JOB_KEYS)}")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        problems.add(header_line, "", f"column(s) {twice} given twice: keep one of each")
+    rows: list[Row] = []
+    id_at = names.index("id") if "id" in names else len(names)
+    for number, (line, cells) in enumerate(records, start=1):
+        label = job_label(cells[id_at].strip() if id_at < len(cells) else None, number)
+        if len(cells) > len(names):
+            problems.add(line, label, f"{len(cells)} cells but {len(names)} columns: quote a cell that holds a comma")
+            continue
         job: dict[str, Any] = {}
-        for k, v in row.items():
-            v = (v or "").strip()
-            if not v:
+        for k, v in zip(names, cells):
+            v = v.strip()
+            if not v or k not in JOB_KEYS:
                 continue
-            k = k.strip()
-            job[k] = parse_options_cell(v, f"{where} {k}") if k in ("design_options", "export_options") else v
-        if job:
-            rows.append((where, job))
+            try:
+                job[k] = parse_options_cell(v, k) if k in ("design_options", "export_options") else v
+            except ConfigError as exc:
+                problems.add(line, label, str(exc))
+        rows.append((lambda key, line=line: line, job))
     return rows
 
 
@@ -616,44 +626,57 @@ def load_manifest(path: str | os.PathLike[str]) -> Manifest:
     """Read, validate and resolve a manifest (``.toml`` or ``.csv``).
 
     Raises:
-        ConfigError: listing every structural problem found (bad syntax, unknown
-            keys, duplicate ids, paths leaving the manifest's folder...).
+        ConfigError: listing every problem found, each with the manifest's
+            file name and line (``m.toml:12: job 'x': ...``): bad syntax (alone:
+            nothing more can be read), unknown keys, duplicate ids, input files
+            missing or leaving the manifest's folder, unknown printers, bad values.
     """
+    from saucerfab.errors import SaucerfabError
+    from saucerfab.profiles import load_profile
+
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".toml", ".csv"):
         raise ConfigError(f"manifest {str(path)!r}: use a .toml or .csv file")
-    text = _read_text(path)
+    text = read_manifest_text(path)
     root = path.resolve().parent
+    problems = Problems(path)
     if suffix == ".toml":
-        defaults, rows = _toml_rows(path, text)
-    else:
-        defaults, rows = {}, _csv_rows(path, text)
-    if not rows:
-        raise ConfigError(f"manifest {str(path)!r} lists no jobs")
+        defaults, rows, lines = _toml_rows(path, text, problems)
+        defaults_line: Callable[[str | None], int | None] = lines.defaults
+    else:  # CSV has no defaults
+        defaults, rows, defaults_line = {}, _csv_rows(path, text, problems), lambda key: None
     if len(rows) > MAX_JOBS:
         raise ConfigError(f"manifest {str(path)!r} lists {len(rows)} jobs; at most {MAX_JOBS}, split it")
-    problems: list[str] = []
+    if not rows and not len(problems):
+        problems.add(None, "", "lists no jobs: add [[job]] tables (TOML) or rows (CSV)")
+
+    @functools.cache  # per manifest: profiles are read once, not once per job
+    def printer_problem(key: str) -> str | None:
+        try:
+            load_profile(key)
+        except SaucerfabError as exc:
+            return str(exc)
+        return None
+
     jobs: list[JobSpec] = []
     seen: dict[str, str] = {}
-    for where, raw in rows:
-        try:
-            job = _build_job(_merge(defaults, raw), root, where)
-        except ConfigError as exc:
-            problems.append(str(exc))
-            continue
-        folded = job.id.lower()  # output folders must not collide on case-insensitive disks
-        if folded in seen:
-            problems.append(f"{where}: id {job.id!r} is used twice (also {seen[folded]}); ids name output folders")
-            continue
-        seen[folded] = where
-        jobs.append(job)
-    if problems:
-        shown = problems[:20]
-        more = f"\n  ... and {len(problems) - 20} more" if len(problems) > 20 else ""
-        raise ConfigError(
-            f"manifest {str(path)!r} has {len(problems)} problem(s); nothing was run:\n  "
-            + "\n  ".join(shown)
-            + more
-        )
+    for number, (locate, own) in enumerate(rows, start=1):
+        raw = _merge(defaults, own)
+        report = reporter(problems, own, defaults, locate, defaults_line, job_label(raw.get("id"), number))
+        job_id, twice = raw.get("id"), False
+        if isinstance(job_id, str) and job_id:
+            folded = job_id.lower()  # output folders must not collide on case-insensitive disks
+            twice = folded in seen
+            if twice:
+                report("id", f"id {job_id!r} is used twice (also {seen[folded]}); ids name output folders: "
+                       "give each job its own")
+            else:
+                seen[folded] = f"{path.name}:{locate('id')}"
+        job = _build_job(raw, root, report, printer_problem, f"{path.name}:{locate(None)}")
+        if job is not None and not twice:
+            jobs.append(job)
+    if len(problems):
+        raise problems.error()
     return Manifest(path=path.resolve(), root=root, jobs=tuple(jobs))
+

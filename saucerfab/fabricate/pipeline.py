@@ -188,24 +188,30 @@ PRINTER_SOURCES = {
 }
 
 
-def design_printer(design: Design) -> str | None:
-    """The printer a design was made for, as ``saucerfab design --printer`` was given (key or .toml), or None.
+def printer_made_for(parameters: Any) -> str | None:
+    """The printer a design was made for, from its design.json ``parameters`` (key or .toml), or None.
 
-    Read from design.json's ``parameters.printer``, else the key its
-    ``parameters.print_target`` records; None for a design that records
-    neither (a synthetic design, or one older than the print target).
+    ``parameters.printer`` (as ``saucerfab design --printer`` was given), else
+    the key ``parameters.print_target`` records; None for parameters that
+    record neither (a synthetic design, one older than the print target, or
+    not a mapping). The one rule for ``saucerfab export`` without
+    ``--printer`` (:func:`export_printer`) and a batch job without a
+    ``printer`` (:func:`saucerfab.batch.jobs.design_printer`, which reads
+    design.json alone).
     """
-    made = design.parameters.get("printer")
-    if not isinstance(made, str) or not made:
-        made = (design.parameters.get("print_target") or {}).get("printer")
-    return made if isinstance(made, str) and made else None
+    params = parameters if isinstance(parameters, dict) else {}
+    target = params.get("print_target")
+    for made in (params.get("printer"), target.get("printer") if isinstance(target, dict) else None):
+        if isinstance(made, str) and made.strip():
+            return made
+    return None
 
 
 def export_printer(design: Design, printer: str | PrinterProfile | None) -> tuple[PrinterProfile, str]:
     """The profile to export ``design`` for, and where it came from (a key of :data:`PRINTER_SOURCES`).
 
     ``printer`` when given; else the printer the design was made for
-    (:func:`design_printer`); else :data:`~saucerfab.profiles.DEFAULT_PRINTER`.
+    (:func:`printer_made_for`); else :data:`~saucerfab.profiles.DEFAULT_PRINTER`.
 
     Raises:
         ConfigError: an unknown printer, or the design's own printer can no
@@ -213,7 +219,7 @@ def export_printer(design: Design, printer: str | PrinterProfile | None) -> tupl
     """
     if printer is not None:
         return (printer if isinstance(printer, PrinterProfile) else load_profile(printer)), "given"
-    made = design_printer(design)
+    made = printer_made_for(design.parameters)
     if made is None:
         return load_profile(DEFAULT_PRINTER), "default"
     try:

@@ -288,13 +288,15 @@ def test_rich_display(batch: Path, tmp_path: Path) -> None:
         "waves-j55,designs/waves,j55,80,texture_px=64\n"
         "gone,designs/none,j55,80,\n"
     )
+    # there, so the manifest loads (issue 42), but no design.json: the job fails when it runs
+    (batch.parent / "designs" / "none").mkdir(exist_ok=True)
     buf = io.StringIO()
     console = Console(file=buf, force_terminal=True, color_system=None, width=200)
     result = run_batch(csv, tmp_path / "out", workers=0, display=RichDisplay(console))
     print_table(result.outcomes, console)
     text = buf.getvalue()
     assert "waves-j55: ok check printable" in text  # a line per finished job
-    assert "gone: failed (inputs: design folder 'designs/none' does not exist" in text
+    assert "gone: failed (inputs: 'designs/none' is not a design folder (no design.json)" in text
     assert "2/2" in text  # the overall progress bar
     assert "2 jobs: 1 ok, 1 failed" in text  # the final table's summary
 
@@ -514,10 +516,13 @@ design = "designs/ripples"
 cup_diameter_mm = 2000
 """,
     )
+    # there, so the manifest loads (a missing one is refused at load, issue 42), but empty:
+    # the job fails when it runs, on its own
+    (tmp_path / "b" / "designs" / "missing").mkdir()
     result = run_batch(manifest, tmp_path / "out", workers=0)
     assert result.outcome("fine").status == "ok"
     gone = result.outcome("gone")
-    assert gone.status == "failed" and gone.stage == "inputs" and "does not exist" in gone.reason
+    assert gone.status == "failed" and gone.stage == "inputs" and "not a design folder" in gone.reason
     big = result.outcome("too-big")
     assert big.status == "failed" and big.stage == "export" and "build volume" in big.reason
     assert result.exit_code == 1

@@ -38,6 +38,10 @@ HEAD = '[defaults]\nprinter = "j55"\ncup_diameter_mm = 80\n\n'
 
 def _manifest(folder: Path, text: str, name: str = "m.toml") -> Path:
     folder.mkdir(parents=True, exist_ok=True)
+    # the inputs the jobs below name: a manifest's files must exist when it loads (issue 42)
+    (folder / "d").mkdir(exist_ok=True)
+    for image in ("a.png", "b.png"):
+        (folder / image).write_bytes(b"")
     p = folder / name
     p.write_text(text, encoding="utf-8")
     return p

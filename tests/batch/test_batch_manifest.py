@@ -149,8 +149,9 @@ design = "d"
 direct = "img/a.png"
 
 [[job]]
-id = "nocup"
+id = "badcup"
 printer = "j55"
+cup_diameter_mm = -5
 design = "d"
 
 [[job]]
@@ -198,7 +199,7 @@ direct = "img/a.png"
         "used twice",
         "unknown format(s) ['dwg']",
         "not both",
-        "cup_diameter_mm",
+        "'cup_diameter_mm' must be a positive number of millimetres, got -5",
         "unknown key(s) ['colour']",
         "max_iters must be at least 1",
         "texture_px must be a power of two",
