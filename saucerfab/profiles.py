@@ -24,7 +24,7 @@ from saucerfab.tomlfile import read_toml
 
 #: the profile used when none is named
 DEFAULT_PRINTER = "j55"
-#: what a profile may do about features under its ``min_feature_mm``
+#: what a profile's exports may do about walls and features under its minimums
 THIN_POLICIES = ("warn", "refuse")
 #: largest profile file read (a real one is a few hundred bytes)
 MAX_PROFILE_BYTES = 100_000
@@ -46,7 +46,12 @@ class PrinterProfile:
         preferred_format: the one to send when there is a choice.
         max_triangles: polygon limit (0 = none).
         max_file_mb: file size limit (0 = none).
-        thin_policy: ``warn`` or ``refuse`` when features are below min_feature_mm.
+        thin_policy: what an export does about walls and features under the
+            minimums that it cannot fix: ``warn`` (writes the files and says
+            so) or ``refuse``. The checker's verdict does not depend on it
+            (walls under min_wall_mm over more than
+            ``Limits.thin_wall_error_fraction`` of the surface are not
+            printable on any profile).
         notes: free text.
     """
 

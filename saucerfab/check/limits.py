@@ -140,11 +140,18 @@ class Limits:
             triangles ends in seconds.
         min_wall_mm: wall thickness to warn under when no printer is given
             (``None``: only report the estimate).
-        thin_wall_error_fraction: under a ``refuse`` profile, thin walls are
-            an error only when at least this share of the sampled surface is
-            thin; fewer thin samples are isolated spots (a spike, the wedge
-            where a sloping top meets a side wall) that a printer blunts, and
-            are reported as a warning with their place.
+        thin_wall_error_fraction: the share of the sampled surface (by area)
+            that may lie on walls under a printer profile's ``min_wall_mm``:
+            over it, ``thin_walls`` is an error (not printable) whatever the
+            profile's ``thin_policy``; at or under it, a warning with the
+            place (isolated spots - a sharp edge, a spike the relief test did
+            not clear - that a printer blunts). 0.5 %: a good export
+            measures 0 and a plate under the minimum 90-100 %; 0.5 % is
+            about 20 of the ~3,000-4,000 samples that measure a wall, so one
+            or two stray samples never decide it (the measurements: the
+            check README, "How much thin wall a part may have"). A minimum
+            asked for without a printer (``min_wall_mm`` above, ``check
+            --min-wall``) only warns.
         texture_dpi_fraction: warn when the texture's resolution on the
             model is below this fraction of the printer's dpi.
         solid_colour_density: faces whose texels per mm are below this
@@ -262,7 +269,7 @@ class Limits:
 
 DEFAULT_LIMITS = Limits()
 
-#: what checking a mesh costs on the 2-core development machine (issue 16, ``benchmarks/RESULTS.md``)
+#: what checking a mesh costs on the 2-core development machine (issue 16, ``benchmarks/RESULTS.md``, Checker budgets)
 COST_PER_MILLION_TRIANGLES = "about 1 GB of memory and 15 s per million triangles"
 
 

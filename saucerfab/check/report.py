@@ -83,7 +83,7 @@ CODES: dict[str, tuple[str, str]] = {
     "too_many_triangles": ("error", "over the printer's or bureau's polygon limit"),
     "file_too_large": ("error", "over the printer's or bureau's file-size limit"),
     "format_not_accepted": ("error", "the printer's software or the bureau does not take this format"),
-    "thin_walls": ("error", "walls thinner than the printer's minimum (warning when its thin_policy is warn)"),
+    "thin_walls": ("error", "walls thinner than the printer's minimum over more than a set share of the surface (Limits.thin_wall_error_fraction, 0.5 %; a warning under it)"),
     # -- colour
     "texture_missing": ("error", "a referenced texture is not there"),
     "texture_unreadable": ("error", "a texture that cannot be decoded, or of a format printers do not take"),

@@ -72,22 +72,24 @@ def thin_walls(bvh: BVH, tri: np.ndarray, normals: np.ndarray, areas: np.ndarray
     if required is None:
         return
     thin = tt < required
-    stats["thin_wall_fraction"] = round(float(thin.mean()), 5)
+    share = float(thin.mean())
+    stats["thin_wall_fraction"] = round(share, 5)
     if thin.any():
-        sev = "warning"
-        if (
-            profile is not None
-            and profile.thin_policy == "refuse"
-            and float(thin.mean()) >= limits.thin_wall_error_fraction
-        ):
-            sev = "error"
+        # a printer's minimum wall is a rule of the printer: over more than the allowed share of the
+        # surface (Limits.thin_wall_error_fraction) the part is not printable, whatever the profile's
+        # thin_policy; a minimum asked for without a printer (--min-wall) only reports
+        error = profile is not None and share > limits.thin_wall_error_fraction
         who = f"{profile.name}'s minimum" if profile is not None else "the minimum asked for"
+        verdict = ""
+        if profile is not None:
+            verdict = (f", {'more' if error else 'no more'} than the {100 * limits.thin_wall_error_fraction:g}% "
+                       f"a part may have{': not printable' if error else ''}")
         fi = gidx[f[ok][thin]]
         out.append(finding(
             "thin_walls",
             f"walls under {required:g} mm ({who}): {int(thin.sum())} of {int(ok.sum())} sampled points "
-            f"({100 * thin.mean():.1f}% of the surface); thinnest {float(tt[i]):.3f} mm at {fmt_pt(where_pt)}",
-            severity=sev,  # type: ignore[arg-type]
+            f"({100 * share:.1f}% of the surface{verdict}); thinnest {float(tt[i]):.3f} mm at {fmt_pt(where_pt)}",
+            severity="error" if error else "warning",
             where=where(where_pt, fi, count=int(thin.sum())),
         ))
 

@@ -18,7 +18,9 @@ Construction, all with manifold3d so the result is a guaranteed oriented
 * the *cup seat* (``FabOptions.seat``): a plate whose outline is the convex
   hull of the cup's footprint (grown by clearance + rim) and the saucer's
   footprint, minus that footprint, so it meets the block face to face and
-  never covers the saucer's top. ``recess``: the plate top is
+  never covers the saucer's top; cut at the saucer's edge facing the cup,
+  so it never runs down the saucer's sides
+  (:func:`saucerfab.fabricate.seat.clip_to_cup_side`). ``recess``: the plate top is
   ``seat_depth_mm`` above the cup's standing plane and a pocket of the cup's
   footprint grown by the clearance is cut down to exactly that plane (model
   z = 0). ``ring``: the plate top is the standing plane and a ring rises
@@ -55,6 +57,9 @@ import numpy as np
 from saucerfab.design import Design
 from saucerfab.errors import MeshError
 from saucerfab.fabricate.options import FabOptions
+from saucerfab.fabricate.seat import (
+    OUTLINE_EPS_MM, clip_to_cup_side, cross_section, cup_outline_mm, facing_edge, seat_wall,
+)
 from saucerfab.profiles import PrinterProfile
 from saucerfab.heightfield import make_grid, triangulate
 from saucerfab.relief import WALL_MARGIN, crest_widths, wall_widths
@@ -63,10 +68,6 @@ from saucerfab.relief import WALL_MARGIN, crest_widths, wall_widths
 #: the 10 nm rounding of written coordinates, so no two distinct vertices
 #: can round onto one position
 MERGE_TOLERANCE_MM = 1e-4
-
-#: vertices of the seat's offset outlines closer than this to the line through
-#: their neighbours are dropped (``CrossSection.simplify``), mm
-OUTLINE_EPS_MM = 1e-6
 
 
 @dataclass(frozen=True)
@@ -230,19 +231,6 @@ def _signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
 # --------------------------------------------------------------------------- seat
 
 
-def _cup_outline_mm(design: Design, mm_per_unit: float) -> np.ndarray:
-    """The cup's footprint in model mm, (K, 2), counter-clockwise.
-
-    A smooth outline gets enough segments that the chord error stays below
-    5 micrometres, so the clearance is what the user asked for; a faceted
-    one gives its corners whatever the count.
-    """
-    cup = design.scene.cup
-    r = cup.circumradius * mm_per_unit
-    seg = max(64, int(math.ceil(math.pi / math.acos(max(1.0 - 0.005 / r, -1.0)))))
-    return cup.boundary(min(seg, 2048)) * mm_per_unit
-
-
 def footprint_on_clipper_grid(xs_mm: np.ndarray, ys_mm: np.ndarray):  # -> (CrossSection, xs, ys)
     """The saucer's footprint rectangle and the grid, its border moved onto CrossSection's grid.
 
@@ -315,12 +303,6 @@ def seat_prism(cs, z0: float, z1: float, xs_mm: np.ndarray, ys_mm: np.ndarray): 
 
     m = m3d.Manifold.extrude(cs, z1 - z0).translate((0.0, 0.0, z0))
     return m.warp_batch(lambda p: snap_to_footprint(p, xs_mm, ys_mm))
-
-
-def _cross_section(poly: np.ndarray):  # -> manifold3d.CrossSection
-    import manifold3d as m3d
-
-    return m3d.CrossSection([np.ascontiguousarray(poly, dtype=np.float64)])
 
 
 # --------------------------------------------------------------------------- build
@@ -410,6 +392,9 @@ def build_solid(
     if profile is not None:
         wall = profile.min_wall_mm
         problems.extend(opts.walls_under(wall))
+        sw = seat_wall(design.scene, s, opts, wall)
+        if sw is not None and sw.thin:
+            problems.append(f"{sw.problem()}: use --cup-diameter-mm {sw.smallest_cup_mm} or more, or --seat none")
         hmm, blunted = _blunt_for(profile, design, hmm, xs, ys, s)
         if blunted:
             warnings.append(blunted)
@@ -448,13 +433,13 @@ def build_solid(
     if block.status() != m3d.Error.NoError:
         raise MeshError(f"manifold3d rejected the saucer block: {block.status()}")
 
-    cup_outline = _cup_outline_mm(design, s)
+    cup_outline = cup_outline_mm(design.scene, s)
     solid = block
     kind = opts.seat
     top_z = 0.0
     pocket = np.zeros((0, 2))
     if kind != "none":
-        cup_cs = _cross_section(cup_outline)
+        cup_cs = cross_section(cup_outline)
         # Clipper's round joins can leave vertex pairs ~1e-8 mm apart; the hull keeps one
         # of a pair and the ring both, so the two outlines would differ by a sliver.
         # simplify() drops them (moving the outline by under OUTLINE_EPS_MM).
@@ -470,7 +455,8 @@ def build_solid(
             warnings.append(
                 "the cup's clearance outline overlaps the saucer's footprint; the seat is clipped there"
             )
-        plate_cs = m3d.CrossSection.batch_hull([outer, footprint]) - footprint
+        edge = facing_edge(cup_outline, (xs[0], xs[-1]), (ys[0], ys[-1]))
+        plate_cs = clip_to_cup_side(m3d.CrossSection.batch_hull([outer, footprint]) - footprint, edge)
         pocket_cs = inner - footprint
         top_z = opts.seat_depth_mm
         if kind == "recess":
@@ -479,7 +465,7 @@ def build_solid(
             solid = m3d.Manifold.batch_boolean([block, plate], m3d.OpType.Add) - cut
         else:  # ring
             plate = seat_prism(plate_cs, z_bottom, 0.0, xs, ys)
-            ring = seat_prism((outer - inner) - footprint, 0.0, opts.seat_depth_mm, xs, ys)
+            ring = seat_prism(clip_to_cup_side((outer - inner) - footprint, edge), 0.0, opts.seat_depth_mm, xs, ys)
             solid = m3d.Manifold.batch_boolean([block, plate, ring], m3d.OpType.Add)
         polys = pocket_cs.to_polygons()
         pocket = np.asarray(max(polys, key=len), np.float64) if polys else pocket

@@ -5,7 +5,9 @@ unit is ``Scene.mm_per_unit`` mm) and its printer (a profile from
 :mod:`saucerfab.profiles`, the J55 unless asked otherwise). Before
 any optimization :func:`preflight` refuses what cannot be printed whatever
 the optimizer does (a part larger than the build volume at the worst heights
-the height bound allows, seat or base walls under the printer's minimum wall,
+the height bound allows, seat or base walls under the printer's minimum wall -
+the seat's wall against the saucer by the export's own rule,
+:func:`saucerfab.fabricate.seat.seat_wall`, naming the smallest cup that works -
 a base shape whose crests cannot be made printable inside the bound), each
 with the fix. During the optimization :class:`CrestProjection` keeps every
 iterate within the printer's minimum feature and wall (:mod:`saucerfab.relief`), so
@@ -22,6 +24,7 @@ import numpy as np
 
 from saucerfab.errors import ConfigError
 from saucerfab.fabricate.options import FabOptions
+from saucerfab.fabricate.seat import seat_wall
 from saucerfab.profiles import DEFAULT_PRINTER, PrinterProfile, load_profile
 from saucerfab.heightfield import make_grid
 from saucerfab.relief import OPTIMIZER_TIGHTEN, blunt_thin_crests
@@ -131,9 +134,10 @@ def preflight(target: PrintTarget, scene: Scene, base: np.ndarray, options: FabO
 
     Raises:
         ConfigError: the part cannot fit the build volume, a wall is under the
-            printer's minimum, or the base shape's crests cannot be made as
-            wide as the minimum feature inside the height bound; the message
-            names the fix.
+            printer's minimum (the seat's against the saucer: naming the
+            smallest cup size that works), or the base shape's crests cannot
+            be made as wide as the minimum feature inside the height bound;
+            the message names the fix.
     """
     opts = options or FabOptions()
     p = target.profile
@@ -155,10 +159,13 @@ def preflight(target: PrintTarget, scene: Scene, base: np.ndarray, options: FabO
     thin = opts.walls_under(p.min_wall_mm)
     if thin:
         raise ConfigError(f"for {p.name}: {'; '.join(thin)}; raise it in the export options")
+    # the seat's wall against the saucer grows with the cup: the export's own rule (it counts a thin
+    # one among its problems), so a design is never made at a size its export would call too thin
+    seat = seat_wall(scene, target.mm_per_unit, opts, p.min_wall_mm)
+    if seat is not None and seat.thin:
+        raise ConfigError(f"for {p.name}: {seat.problem()}; use --cup-diameter-mm {seat.smallest_cup_mm} "
+                          "or more, or another --printer")
     notes: list[str] = []
-    sliver = _seat_sliver_note(target, scene, opts)
-    if sliver:
-        notes.append(sliver)
     res = CrestProjection(target, scene, base).blunt(base)
     if res.remaining:
         raise ConfigError(
@@ -173,34 +180,6 @@ def preflight(target: PrintTarget, scene: Scene, base: np.ndarray, options: FabO
             f"the optimizer starts from them blunted (at most {res.max_change * target.mm_per_unit:.2f} mm)"
         )
     return notes
-
-
-def _seat_sliver_note(target: PrintTarget, scene: Scene, options: FabOptions) -> str:
-    """A warning when the cup's seat plate would run down the saucer's sides as a sliver, or "".
-
-    The plate is the hull of the cup's footprint (grown by clearance and rim)
-    and the saucer's, less the saucer's (fabricate/solid.py). When the grown
-    footprint reaches past the saucer's sides, the hull's edge runs from it to
-    the saucer's far corners just outside the side walls: a sliver that tapers
-    to nothing, thinner than any minimum wall along part of its length.
-    """
-    if options.seat == "none":
-        return ""
-    s = target.mm_per_unit
-    grow = options.seat_clearance_mm + options.seat_rim_mm
-    r_u = scene.cup.circumradius
-    x0, x1 = scene.saucer.x_range
-    side_u = min(-x0, x1)  # the cup stands at x = 0
-    if r_u * s + grow <= side_u * s + 1e-9:
-        return ""
-    over = r_u * s + grow - side_u * s
-    fits = f"--cup-diameter-mm {math.ceil(2 * r_u * grow / (side_u - r_u) - 1e-9)} or more, or " if side_u > r_u else ""
-    return (
-        f"the cup's seat (its footprint grown by {grow:g} mm of clearance and rim) reaches {over:.2f} mm past the "
-        f"saucer's sides, so the seat plate runs down them as a sliver thinner than {target.profile.name}'s "
-        f"minimum wall {target.profile.min_wall_mm:g} mm (exports will warn of thin walls); use "
-        f"{fits}export with a smaller --seat-rim-mm or --seat none"
-    )
 
 
 @dataclass

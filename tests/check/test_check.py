@@ -432,14 +432,19 @@ def test_polygon_file_size_and_format_limits(tmp_path: Path, saucer: tuple) -> N
 def test_thin_wall_with_location_and_policy(tmp_path: Path) -> None:
     V, F = fx.box((50.0, 50.0, 0.6))  # a 0.6 mm plate
     p = fx.write_3mf(tmp_path / "plate.3mf", V, F, colors=True)
-    r = check_mesh(p, printer="j55")  # min wall 1.0, thin_policy warn
+    # min wall 1.0, thin_policy warn: a wall under a printer's minimum over most of the surface is not
+    # printable whatever the policy (issue 42; Limits.thin_wall_error_fraction)
+    r = check_mesh(p, printer="j55")
     f = next(f for f in r.findings if f.code == "thin_walls")
-    assert f.severity == "warning" and r.exit_code == 0 and r.with_strict().exit_code == 1
+    assert f.severity == "error" and r.exit_code == 1
     assert r.stats["min_wall_mm"] == pytest.approx(0.6, abs=1e-3)
     assert f.where is not None and len(f.where["point_mm"]) == 3
     assert r.stats["thin_wall_fraction"] > 0.9
     r = check_mesh(p, printer="bureau")  # min wall 2.0, refuse
     assert "thin_walls" in codes(r, "error") and r.exit_code == 1
+    r = check_mesh(p, limits=Limits(min_wall_mm=1.0))  # a minimum asked for without a printer only warns
+    f = next(f for f in r.findings if f.code == "thin_walls")
+    assert f.severity == "warning" and r.exit_code == 0 and r.with_strict().exit_code == 1
     r = check_mesh(p, limits=Limits(min_wall_mm=0.5))
     assert "thin_walls" not in codes(r)
     r = check_mesh(p)  # no printer, no minimum: only the estimate
@@ -457,7 +462,8 @@ def test_relief_crests_are_not_thin_walls_but_fins_are(tmp_path: Path) -> None:
     r = check_mesh(fx.write_stl(tmp_path / "teeth.stl", V, F), printer="j55")
     assert "thin_walls" not in codes(r) and r.with_strict().exit_code == 0
     assert r.stats["relief_thin_samples"] > 0 and r.stats["min_wall_mm"] >= 1.0
-    # a fin: one row 10 mm above its neighbours, 1 mm wide at its foot: thin for most of its height
+    # a fin: one row 10 mm above its neighbours, 1 mm wide at its foot: thin for most of its height,
+    # a third of the surface: not printable (issue 42)
     ys = np.arange(0, 10.0, 0.5)
     xs = np.linspace(0, 20.0, 9)
     h = np.full((len(ys), len(xs)), 5.0)
@@ -465,7 +471,7 @@ def test_relief_crests_are_not_thin_walls_but_fins_are(tmp_path: Path) -> None:
     V, F, _ = fx.heightfield_solid(h, xs, ys)
     r = check_mesh(fx.write_stl(tmp_path / "fin.stl", V, F), printer="j55")
     f = next(f for f in r.findings if f.code == "thin_walls")
-    assert f.severity == "warning" and r.stats["min_wall_mm"] < 0.5
+    assert f.severity == "error" and r.stats["min_wall_mm"] < 0.5
     assert r.stats["relief_thin_samples"] > 0  # its foot, beside the block, is relief
 
 

@@ -598,7 +598,7 @@ def test_thin_features_are_blunted_or_refused_per_profile(tmp_path: Path) -> Non
     # a 4 mm cup makes the synthetic bumps 0.17 mm wide: thinner than any printer makes
     d = synthetic_design(resolution=24, texture_size=TEX, seed=1)
     # no seat: at 4 mm the cup stands 0.5 mm from the saucer, all of it the seat's clearance, and the
-    # seat's wall there is a problem of its own (solid.seat_wall, issue 42)
+    # seat's wall there is a problem of its own (fabricate.seat.seat_wall, issue 42)
     opts = FabOptions(texture_px=ATLAS, seat="none", base_thickness_mm=1.0, min_thickness_mm=1.0)
     warn = replace(ALL_FORMATS, min_wall_mm=0.5)
     res = export_design(d, tmp_path / "w", printer=warn, cup_diameter_mm=4.0, formats=["stl"], options=opts)
