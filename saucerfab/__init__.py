@@ -27,4 +27,37 @@ if "OMP_WAIT_POLICY" not in _os.environ:
 
 from saucerfab.errors import SaucerfabError  # noqa: E402
 
-__all__ = ["SaucerfabError", "__version__"]
+#: the public Python API (what a notebook calls): name -> the module that defines it. Each is
+#: imported on first use (PEP 562), so ``import saucerfab`` stays cheap and ``saucerfab check``
+#: never loads torch. The README's "Python API" example uses them; tests/test_api.py runs it.
+_API = {
+    "DesignRequest": "saucerfab.optimize.request",
+    "run_design": "saucerfab.optimize.pipeline",
+    "load_design": "saucerfab.design",
+    "Design": "saucerfab.design",
+    "FabOptions": "saucerfab.fabricate.options",
+    "export_design": "saucerfab.fabricate.pipeline",
+    "ExportResult": "saucerfab.fabricate.pipeline",
+    "verify_print": "saucerfab.verify.core",
+    "check_mesh": "saucerfab.check",
+    "load_profile": "saucerfab.profiles",
+    "parse_eyes": "saucerfab.eyes",
+}
+
+__all__ = ["SaucerfabError", "__version__", *_API]
+
+
+def __getattr__(name: str) -> object:
+    """The public API's names, each imported from its module on first use."""
+    module = _API.get(name)
+    if module is None:
+        raise AttributeError(f"module 'saucerfab' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # the next lookup is a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_API})
