@@ -12,6 +12,7 @@ package's top and imports nothing heavy.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -98,6 +99,11 @@ def _default_dirs() -> list[Path]:
 _OPTIONAL: dict[str, Callable[[Any], Any]] = {"max_triangles": int, "max_file_mb": float, "thin_policy": str, "notes": str}
 
 
+def _size(v: float) -> bool:
+    """Whether ``v`` is a size: finite and positive."""
+    return math.isfinite(v) and v > 0
+
+
 def _parse(path: Path) -> PrinterProfile:
     d = read_toml(path, "printer profile", max_bytes=MAX_PROFILE_BYTES, size_hint="a profile is a few lines",
                   nesting_hint="a profile is a few flat keys")
@@ -127,22 +133,27 @@ def _parse(path: Path) -> PrinterProfile:
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"printer profile {str(path)!r} has a bad value: {exc}") from None
     bad = [f for f in prof.accepted_formats if f not in FORMATS]
-    if (
-        len(prof.build_volume_mm) != 3
-        or min(prof.build_volume_mm) <= 0
-        or prof.min_wall_mm <= 0
-        or prof.min_feature_mm <= 0
-        or prof.dpi <= 0
-        or prof.max_texture_px < 256
-        or bad
-        or prof.preferred_format not in prof.accepted_formats
-        or prof.thin_policy not in THIN_POLICIES
-    ):
-        raise ConfigError(
-            f"printer profile {str(path)!r} is inconsistent: build volume must be 3 positive sizes, "
-            f"walls/features/dpi positive, max_texture_px >= 256, formats from {FORMATS} "
-            f"(unknown: {bad}), preferred among accepted, thin_policy {'|'.join(THIN_POLICIES)}"
-        )
+    broken = [
+        rule for rule, ok in (
+            ("build_volume_mm must be 3 finite positive sizes",
+             len(prof.build_volume_mm) == 3 and all(math.isfinite(v) and v > 0 for v in prof.build_volume_mm)),
+            (f"min_wall_mm must be finite and positive, got {prof.min_wall_mm!r}", _size(prof.min_wall_mm)),
+            (f"min_feature_mm must be finite and positive, got {prof.min_feature_mm!r}", _size(prof.min_feature_mm)),
+            (f"dpi must be finite and positive, got {prof.dpi!r}", _size(prof.dpi)),
+            (f"max_texture_px must be a whole number >= 256, got {d['max_texture_px']!r}",
+             prof.max_texture_px >= 256 and d["max_texture_px"] == prof.max_texture_px),
+            (f"accepted_formats must come from {', '.join(FORMATS)} (unknown: {', '.join(bad)})", not bad),
+            (f"preferred_format {prof.preferred_format!r} must be one of accepted_formats "
+             f"({', '.join(prof.accepted_formats)})", prof.preferred_format in prof.accepted_formats),
+            (f"thin_policy must be {'|'.join(THIN_POLICIES)}, got {prof.thin_policy!r}",
+             prof.thin_policy in THIN_POLICIES),
+            (f"max_triangles must be 0 (no limit) or positive, got {prof.max_triangles!r}", prof.max_triangles >= 0),
+            (f"max_file_mb must be 0 (no limit) or finite and positive, got {prof.max_file_mb!r}",
+             prof.max_file_mb == 0 or _size(prof.max_file_mb)),
+        ) if not ok
+    ]
+    if broken:
+        raise ConfigError(f"printer profile {str(path)!r} is inconsistent: {'; '.join(broken)}")
     return prof
 
 
