@@ -251,6 +251,10 @@ def load_design(folder: str | os.PathLike[str]) -> Design:
         scene = scene_from_dict(meta["scene"])
     except (KeyError, SaucerfabError) as exc:  # missing, or a scene that no longer validates
         raise DesignError(f"{meta_path} has no valid scene: {exc}") from None
+    for key in ("parameters", "metrics", "inputs"):  # free-form, but mappings: every reader takes them so
+        if not isinstance(meta.get(key, {}), dict):
+            raise DesignError(f"{meta_path}: {key!r} must be a JSON object, got {type(meta[key]).__name__}; "
+                              "re-run 'saucerfab design'")
     n = scene.saucer.resolution
     limit = 4 * 2 * n * n * 3 * 2
     for name in ("heights.npy", "base_heights.npy", "face_uvs.npy", "face_view.npy", "texture.png"):

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ from saucerfab.errors import ConfigError
 #: eye modes of ``--eyes`` (``point``, an older name of ``design``, is still read)
 EYE_MODES = ("design", "both", "box")
 #: the forms ``--eyes`` takes, in ``saucerfab design`` and ``saucerfab verify`` alike
-EYES_USAGE = "design|both|box:W,H[,N]"
+EYES_USAGE = "|".join("box:W,H[,N]" if m == "box" else m for m in EYE_MODES)
 #: the older name of ``design`` (``saucerfab design --eyes point``), still read
 OLD_DESIGN_EYE_NAME = "point"
 #: a viewer's interpupillary distance, mm (adult mean, about 63-64 mm)
@@ -94,6 +95,29 @@ def parse_eyes(text: str, ipd_mm: float = DEFAULT_IPD_MM) -> EyeSpec:
     raise ConfigError(f"--eyes must be one of {EYES_USAGE.replace('|', ', ')}; got {text!r}")
 
 
+def eyes_made_for(parameters: Any) -> EyeSpec | None:
+    """The eyes a design was made for, from its design.json ``parameters``; None for the design eye alone.
+
+    ``saucerfab design --eyes both|box:...`` records ``eyes`` (and ``ipd_mm``
+    for ``both``); the design eye alone records neither. ``saucerfab verify``
+    renders from these eyes by default (a design made for an eye box is
+    verified over that box), and from :class:`EyeSpec`'s default (the design
+    eye and a viewer's two) otherwise. Parameters that cannot be read (not a
+    mapping, an unknown mode) give None.
+    """
+    params = parameters if isinstance(parameters, dict) else {}
+    eyes, ipd = params.get("eyes"), params.get("ipd_mm")
+    if not isinstance(eyes, str):
+        return None
+    if isinstance(ipd, bool) or not isinstance(ipd, (int, float)):
+        ipd = DEFAULT_IPD_MM
+    try:
+        spec = parse_eyes(eyes, float(ipd))
+    except ConfigError:
+        return None
+    return None if spec.mode == "design" else spec
+
+
 def view_axes(eye: tuple[float, float, float], target: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
     """(right, up) unit vectors of a look-at from ``eye`` to ``target`` with z up."""
     fwd = np.subtract(target, eye).astype(np.float64)
@@ -131,7 +155,9 @@ def eye_positions(
             for dr in np.linspace(-w / 2, w / 2, spec.box_steps):
                 if abs(dr) < 1e-9 and abs(du) < 1e-9:
                     continue  # the design eye is already there
-                eyes.append(at(f"box({dr:+.0f},{du:+.0f})", float(dr), float(du)))
+                # whole millimetres as before ("box(+20,-10)"), a fraction where a small box has one:
+                # no two eyes share a name (verify names its renders and pictures by it)
+                eyes.append(at(f"box({dr:+.4g},{du:+.4g})", float(dr), float(du)))
     return eyes
 
 

@@ -232,7 +232,7 @@ def verify_design(
 ) -> Any:
     """Quick-verify a design folder through a trial export; results in ``design_dir/verify/``.
 
-    The design is exported (OBJ, for ``printer``, with a :data:`QUICK_TEXTURE_PX`
+    The design is exported (OBJ, or the first format verify renders that ``printer`` takes, with a :data:`QUICK_TEXTURE_PX`
     atlas) to a temporary folder, that print is verified as :func:`finish_print` does, the pictures and
     ``verify.json`` (with the printer named) go into the design folder's
     ``verify/`` (replaced as a whole) and its ``report.html`` is rewritten
@@ -247,10 +247,21 @@ def verify_design(
     from saucerfab.report_page import write_design_report
     from saucerfab.verify import verify_print
 
+    from saucerfab.errors import ExportError
+    from saucerfab.formats import WRITERS
+    from saucerfab.profiles import load_profile
+    from saucerfab.verify.printfolder import RENDERED_FORMATS
+
     design_dir = Path(design_dir)
+    profile = load_profile(printer)
+    # the trial print in a format verify renders and the printer takes (OBJ first: the quickest to read)
+    rendered = [f for f in RENDERED_FORMATS if f in WRITERS]  # ("zip" is how verify reads a zipped OBJ)
+    fmt = next((f for f in rendered if f in profile.accepted_formats), None)
+    if fmt is None:
+        raise ExportError(f"{profile.name} takes none of {', '.join(rendered)}, the formats verify renders")
     with tempfile.TemporaryDirectory(prefix="saucerfab-trial-") as tmp:
-        trial = export_design(design_dir, Path(tmp) / "print", printer=printer, cup_diameter_mm=cup_diameter_mm,
-                              formats=["obj"], options=FabOptions(texture_px=QUICK_TEXTURE_PX))
+        trial = export_design(design_dir, Path(tmp) / "print", printer=profile, cup_diameter_mm=cup_diameter_mm,
+                              formats=[fmt], options=FabOptions(texture_px=QUICK_TEXTURE_PX))
         with atomic_dir(design_dir / "verify") as vtmp:
             res = verify_print(trial.out, res=QUICK_RES, spp=QUICK_SPP, pictures_dir=vtmp, all_formats=False,
                                progress=progress)

@@ -425,15 +425,20 @@ def printability_section(chk: Mapping[str, Any] | None) -> Section | None:
     if not reports:
         return Section(title, "Not checked: saucerfab's checker was not available when the print was exported; "
                               "run 'saucerfab check' on the print files.")
-    counts = finding_counts(f for r in reports for f in r.get("findings") or [])
-    bad = [r for r in reports if r.get("verdict") != "printable"]
-    n = len(reports)
+    # files outside the print set (other-formats/<name>: formats the printer does not take, written on
+    # request and checked without the printer) are listed, but the verdict is the print set's
+    in_set = [r for r in reports if "/" not in str(r.get("path", ""))]
+    counts = finding_counts(f for r in in_set for f in r.get("findings") or [])
+    bad = [r for r in in_set if r.get("verdict") != "printable"]
+    n = len(in_set)
     checked = f"{n} file{'s' if n != 1 else ''} checked: {counts_text(counts)}"
     verdict = (f"Printable: every file passes ({checked})." if not bad else
                f"Not printable: {len(bad)} of {n} files fail ({checked}).")
+    if len(reports) > n:
+        verdict += f" {len(reports) - n} more outside the print set, not for this printer."
     rows = []
     for r in reports:
-        name = Path(str(r.get("path", ""))).name
+        name = str(r.get("path", ""))  # relative to the print folder
         found = [f for f in r.get("findings") or [] if isinstance(f, Mapping)]
         rows += [[name, r.get("verdict"), f.get("severity"), f"{f.get('message')} ({f.get('code')})"] for f in found]
         if not found:

@@ -9,6 +9,9 @@ design's planar texture mapping. It shares nothing with
 mesh, not the baked atlas, not Mitsuba. The seat plate behind the saucer
 (its top ``seat.top_z`` above the saucer's top) blocks reflected rays that
 pass under it, as the printed part does.
+
+Its pieces, :func:`camera_rays` and :func:`cylinder_reflection`, also place
+a saucer feature's reflection exactly (``tests/verify/test_verify_accuracy.py``).
 """
 
 from __future__ import annotations
@@ -29,6 +32,53 @@ def _bilinear(tex: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
             + t[y1, x0] * (1 - fx) * fy + t[y1, x1] * fx * fy)
 
 
+def camera_frame(eye, target, angle_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The camera of :mod:`saucerfab.render.camera`: a look-at from ``eye`` to ``target`` with z up.
+
+    Returns:
+        forward, right, up (unit, (3,) each) and ``tan(angle_deg)``, the
+        frame's half width at unit depth.
+    """
+    fwd = np.asarray(target, np.float64) - np.asarray(eye, np.float64)
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    return fwd, right, np.cross(right, fwd), float(np.tan(np.radians(angle_deg)))
+
+
+def camera_rays(eye, target, angle_deg: float, nx: np.ndarray, ny: np.ndarray) -> np.ndarray:
+    """Unit directions (..., 3) of the rays through frame points (``nx`` right, ``ny`` up, each in [-1, 1])."""
+    fwd, right, up, w = camera_frame(eye, target, angle_deg)
+    d = np.asarray(nx)[..., None] * w * right + np.asarray(ny)[..., None] * w * up + fwd
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def cylinder_reflection(eye, d: np.ndarray, centre, radius: float):
+    """Rays from ``eye`` along ``d`` (..., 3) off the vertical cylinder of ``radius`` about ``centre`` (x, y).
+
+    The first root of ``|o_xy + t d_xy - c|^2 = r^2`` in front of the eye,
+    reflected about the cylinder's exact normal; all in float64.
+
+    Returns:
+        t (...,) along the ray, the hit point p (..., 3), the reflected
+        direction (..., 3), and whether the ray meets the cylinder at all.
+    """
+    eye = np.asarray(eye, np.float64)
+    c = np.asarray(centre, np.float64)
+    oc = eye[:2] - c
+    a = (d[..., :2] ** 2).sum(-1)
+    b = 2 * (d[..., :2] * oc).sum(-1)
+    cc = (oc**2).sum() - radius * radius
+    disc = b * b - 4 * a * cc
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = (-b - np.sqrt(np.maximum(disc, 0))) / (2 * a)
+    p = eye + t[..., None] * d
+    n = np.zeros_like(d)
+    n[..., :2] = (p[..., :2] - c) / radius
+    dr = d - 2 * (d * n).sum(-1, keepdims=True) * n
+    return t, p, dr, (disc > 0) & (t > 0)
+
+
 def cast(scene: dict, texture: np.ndarray, z_top: float, eye, view: str, res: int, sub: int = 4):
     """Render ``view`` of a flat saucer seen from ``eye`` (mm, file frame).
 
@@ -44,17 +94,10 @@ def cast(scene: dict, texture: np.ndarray, z_top: float, eye, view: str, res: in
     """
     v = scene["views"][view]
     eye = np.asarray(eye, np.float64)
-    target = np.asarray(v["target"], np.float64)
-    fwd = (target - eye) / np.linalg.norm(target - eye)
-    right = np.cross(fwd, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, fwd)
-    w = np.tan(np.radians(v["viewing_angle_deg"]))
     k = (np.arange(res * sub) + 0.5) / (res * sub)
     xs, ys = 2 * k - 1, 1 - 2 * k  # NDC of sub-pixel centres: columns right, rows down
     gx, gy = np.meshgrid(xs, ys)
-    d = gx[..., None] * w * right + gy[..., None] * w * up + fwd
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    d = camera_rays(eye, v["target"], v["viewing_angle_deg"], gx, gy)
 
     (x0, x1), (y0, y1) = scene["saucer"]["x_range"], scene["saucer"]["y_range"]
     cup = scene["cup"]
@@ -72,24 +115,13 @@ def cast(scene: dict, texture: np.ndarray, z_top: float, eye, view: str, res: in
     def colour(p: np.ndarray) -> np.ndarray:
         return _bilinear(texture, (p[..., 0] - x0) / (x1 - x0), (p[..., 1] - y0) / (y1 - y0))
 
-    # the cylinder: |o_xy + t d_xy - c|^2 = r^2, first root in front
-    oc = eye[:2] - c
-    a = (d[..., :2] ** 2).sum(-1)
-    b = 2 * (d[..., :2] * oc).sum(-1)
-    cc = (oc**2).sum() - r * r
-    disc = b * b - 4 * a * cc
-    with np.errstate(invalid="ignore", divide="ignore"):
-        tc = (-b - np.sqrt(np.maximum(disc, 0))) / (2 * a)
-    pc = eye + tc[..., None] * d
-    on_cup = (disc > 0) & (tc > 0) & (pc[..., 2] >= cz0) & (pc[..., 2] <= cz1)
+    tc, pc, dr, hit = cylinder_reflection(eye, d, c, r)
+    on_cup = hit & (pc[..., 2] >= cz0) & (pc[..., 2] <= cz1)
 
     tp, pp, on_saucer = hit_plane(np.broadcast_to(eye, d.shape), d)
     direct = on_saucer & ~(on_cup & (tc < tp))
     cup_first = on_cup & ~(on_saucer & (tp < tc))
 
-    n = np.zeros_like(d)
-    n[..., :2] = (pc[..., :2] - c) / r
-    dr = d - 2 * (d * n).sum(-1, keepdims=True) * n
     _tr, pr, refl_hit = hit_plane(pc, dr)
     # the seat plate (behind the saucer, y > y1) stands above the top: a ray crossing y = y1 below it is blocked
     with np.errstate(divide="ignore", invalid="ignore"):

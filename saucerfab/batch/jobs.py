@@ -287,7 +287,7 @@ def load_payload(
 
 
 def design_printer(design_json: Any) -> str:
-    """The printer a design was made for, from its design.json (given parsed): ``parameters.printer``
+    """The printer (a profile key, never a path) a design was made for, from its design.json: ``parameters.printer``
     (as ``saucerfab design --printer`` was given), else ``parameters.print_target.printer``, else
     :data:`~saucerfab.profiles.DEFAULT_PRINTER` (a synthetic design, one older than the print
     target, or an unreadable design.json: the export then says what is wrong with the folder).

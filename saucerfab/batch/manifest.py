@@ -223,7 +223,8 @@ def id_problem(job_id: Any) -> str | None:
 
 
 def _build_job(
-    raw: dict[str, Any], root: Path, report: Report, printer_problem: Callable[[str], str | None], source: str
+    raw: dict[str, Any], root: Path, report: Report, printer_problem: Callable[[str], str | None], source: str,
+    printer_accepts: Callable[[str], tuple[str, ...]] | None = None,
 ) -> JobSpec | None:
     """A :class:`JobSpec` from one job's plain data (defaults merged already), or None.
 
@@ -300,6 +301,12 @@ def _build_job(
         if unknown:
             bad("formats", f"unknown format(s) {unknown}; known: {list(FORMATS)}")
         formats = tuple(dict.fromkeys(fmt.key for _, fmt in named if fmt is not None))
+    if formats and printer is not None and printer_accepts is not None and printer_problem(printer) is None:
+        # the export's rule (fabricate.registry.normalize_formats), said at load instead of after a design run
+        taken = printer_accepts(printer)
+        if refused := [f for f in formats if f not in taken]:
+            bad("formats", f"printer {printer!r} does not take {', '.join(f.upper() for f in refused)} (it takes "
+                f"{', '.join(taken)}); list formats it takes")
 
     has_raw = any(raw.get(k) not in (None, "") for k in (*IMAGE_ROLES, "shape", "scene", "cup"))
     options: dict[str, dict[str, Any]] = {}
@@ -659,6 +666,10 @@ def load_manifest(path: str | os.PathLike[str]) -> Manifest:
             return str(exc)
         return None
 
+    @functools.cache
+    def printer_accepts(key: str) -> tuple[str, ...]:
+        return load_profile(key).accepted_formats
+
     jobs: list[JobSpec] = []
     seen: dict[str, str] = {}
     for number, (locate, own) in enumerate(rows, start=1):
@@ -673,7 +684,7 @@ def load_manifest(path: str | os.PathLike[str]) -> Manifest:
                        "give each job its own")
             else:
                 seen[folded] = f"{path.name}:{locate('id')}"
-        job = _build_job(raw, root, report, printer_problem, f"{path.name}:{locate(None)}")
+        job = _build_job(raw, root, report, printer_problem, f"{path.name}:{locate(None)}", printer_accepts)
         if job is not None and not twice:
             jobs.append(job)
     if len(problems):

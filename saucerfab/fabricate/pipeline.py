@@ -26,6 +26,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -188,21 +189,29 @@ PRINTER_SOURCES = {
 }
 
 
-def printer_made_for(parameters: Any) -> str | None:
-    """The printer a design was made for, from its design.json ``parameters`` (key or .toml), or None.
+#: what a profile key looks like (a profile file's stem): never a path, so a key a design.json
+#: records is only ever looked up among the installation's profiles, not read from a file
+PROFILE_KEY_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
 
-    ``parameters.printer`` (as ``saucerfab design --printer`` was given), else
-    the key ``parameters.print_target`` records; None for parameters that
-    record neither (a synthetic design, one older than the print target, or
-    not a mapping). The one rule for ``saucerfab export`` without
-    ``--printer`` (:func:`export_printer`) and a batch job without a
+
+def printer_made_for(parameters: Any) -> str | None:
+    """The key of the printer a design was made for, from its design.json ``parameters``, or None.
+
+    ``parameters.printer`` (as ``saucerfab design --printer`` was given) when
+    it is a profile key, else the key ``parameters.print_target`` records (a
+    profile given as a .toml file is named by the key it declares); None for
+    parameters that record neither (a synthetic design, one older than the
+    print target, or not a mapping). Only keys are returned, never paths: a
+    design folder may come from anyone, and its printer is looked up among
+    this installation's profiles. The one rule for ``saucerfab export``
+    without ``--printer`` (:func:`export_printer`) and a batch job without a
     ``printer`` (:func:`saucerfab.batch.jobs.design_printer`, which reads
     design.json alone).
     """
     params = parameters if isinstance(parameters, dict) else {}
     target = params.get("print_target")
     for made in (params.get("printer"), target.get("printer") if isinstance(target, dict) else None):
-        if isinstance(made, str) and made.strip():
+        if isinstance(made, str) and PROFILE_KEY_RE.fullmatch(made):
             return made
     return None
 
@@ -224,10 +233,10 @@ def export_printer(design: Design, printer: str | PrinterProfile | None) -> tupl
         return load_profile(DEFAULT_PRINTER), "default"
     try:
         return load_profile(made), "design"
-    except ConfigError as exc:
+    except ConfigError:
         raise ConfigError(
-            f"the design was made for printer {made!r}, which cannot be loaded here ({exc}); "
-            "give --printer with a profile name or .toml path"
+            f"the design was made for printer {made!r}, which is not among this installation's profiles "
+            "(saucerfab printers); give --printer with a profile name or the profile's .toml path"
         ) from None
 
 

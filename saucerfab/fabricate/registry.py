@@ -58,10 +58,16 @@ def normalize_formats(
     if others and not allow_other:
         raise ExportError(
             f"{printer_name} does not take {', '.join(o.upper() for o in others)} (its profile lists "
-            f"{', '.join(accepted)}); give formats it takes, or add --allow-format to write "
+            f"{', '.join(accepted)}); give formats it takes, or (saucerfab export) add --allow-format to write "
             f"{'it' if len(others) == 1 else 'them'} anyway into {OTHER_FORMATS_DIR}/, outside the print set"
         )
-    return [k for k in out if k in accepted], others
+    taken = [k for k in out if k in accepted]
+    if not taken:  # an export is a print set first: other formats come beside it, never instead
+        raise ExportError(
+            f"{printer_name} takes none of {', '.join(o.upper() for o in others)}, so the print set would be "
+            f"empty; add a format it takes (its profile lists {', '.join(accepted)})"
+        )
+    return taken, others
 
 
 def render(mesh: TexturedMesh, fmt: str, options: FabOptions) -> dict[str, bytes]:

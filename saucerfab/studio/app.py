@@ -353,6 +353,10 @@ def create_app(
                 raise StudioError(f"formats must be a list of {', '.join(FORMATS)} (or null: the printer's "
                                   f"preferred format), got {str(formats)[:80]}")
             formats = list(dict.fromkeys(formats))
+            taken = printers[printer].accepted_formats  # the export's rule, said now rather than by the worker
+            if refused := [f for f in formats if f not in taken]:
+                raise StudioError(f"{printers[printer].name} does not take {', '.join(f.upper() for f in refused)}; "
+                                  f"choose among {', '.join(taken)}")
         entry = {"status": "queued", "error": None, "formats": formats, "printable": None, "files": [],
                  "zip": None, "created": now_iso()}
 

@@ -11,6 +11,9 @@ each eye (:mod:`.eyes`):
    meant it, resized to the render with a box filter) over the pixels where
    the saucer's top is seen - directly for the direct view, in the mirror
    for the reflected ones - and only pixels seen fully (coverage >= 0.999);
+   the PSNR leaves out the render's own sampling noise (estimated from its
+   two halves, :class:`~.raytrace.ViewRender`), so it reads the converged
+   render's score at any sample count;
 3. from a moved eye the reference is the **flat print** (:mod:`.flatprint`):
    the reference picture lying flat on the saucer, placed for the design
    eye, ray-traced from the moved eye. What any flat picture does from
@@ -37,11 +40,12 @@ from typing import Any
 import numpy as np
 
 from saucerfab.errors import ConfigError
-from saucerfab.verify.eyes import EyeSpec, eye_positions
+from saucerfab.eyes import EyeSpec, eye_positions, eyes_made_for
 from saucerfab.verify.metrics import best_shift, psnr, shifted, ssim
 from saucerfab.verify.printfolder import (
     PrintScene,
     VerifyInputError,
+    design_parameters,
     find_mesh_files,
     folder_limits,
     load_print_scene,
@@ -144,9 +148,10 @@ def verify_print(
 
     Args:
         folder: a folder written by ``saucerfab export``.
-        eyes: which eyes (default: the design eye and a viewer's two eyes).
+        eyes: which eyes (default: those the design was made for, when it was made for more than
+            the design eye (:func:`saucerfab.eyes.eyes_made_for`); else the design eye and a viewer's two eyes).
         res: render size, pixels per side.
-        spp: samples per pixel (stratified).
+        spp: samples per pixel (the colour pass: two halves, :func:`~.raytrace.colour_halves`).
         min_psnr_db, min_coverage: pass levels per view.
         pictures_dir: where to write the side-by-side pictures (created;
             each written atomically); None writes none.
@@ -161,7 +166,7 @@ def verify_print(
         ConfigError: bad options.
     """
     from saucerfab.verify.flatprint import FlatPrints
-    from saucerfab.verify.raytrace import INTEGRATOR, PrintTracer, mitsuba
+    from saucerfab.verify.raytrace import INTEGRATOR, PrintTracer, mitsuba, sampling_variance
 
     t_start = time.perf_counter()
     _check_levels(res, spp, min_psnr_db, min_coverage)
@@ -182,7 +187,8 @@ def verify_print(
         )
     if not all_formats:
         files = files[:1]
-    spec = eyes or EyeSpec()
+    # the eyes the design was made for (an eye box is verified over that box), else the design eye and a viewer's two
+    spec = eyes or eyes_made_for(design_parameters(folder)) or EyeSpec()
     all_eyes = eye_positions(spec, scene.camera, scene.views["direct"].target)
     jobs = len(all_eyes) * len(views) + (len(files) - 1) * len(views)
     done = 0
@@ -210,23 +216,24 @@ def verify_print(
         for eye in all_eyes if k == 0 else all_eyes[:1]:
             for view in views:
                 r = tracer.render(eye.position, scene.views[view], res, spp)
-                cov = r.direct if view == "direct" else r.reflected
+                cov = r.coverage(view)
                 region = cov >= FULL_COVERAGE
                 ref = refs[view]
-                p0 = psnr(r.rgb, ref, region)
+                noise = sampling_variance(r)  # the render's own noise is not the print's error
+                p0 = psnr(r.rgb, ref, region, noise)
                 if eye.name == "design":
                     design_regions[view] = region
                     p_shift, sh_dx, sh_dy, p1, reg1, ref1 = float("nan"), 0, 0, p0, region, ref
                     kind = REFERENCE_PICTURE
                 else:
-                    sh = best_shift(r.rgb, ref, region, max_shift)
+                    sh = best_shift(r.rgb, ref, region, max_shift, noise)
                     p_shift, sh_dx, sh_dy = sh.psnr_db, sh.dx, sh.dy
                     if flats is None:
                         flats = FlatPrints(surface, scene.cup, all_eyes[0].position, scene.views, pictures8,
                                            design_regions, res, spp)
-                    ref1, flat_seen = flats.render(view, eye.position, scene.views[view], res, spp)
-                    reg1 = region & flat_seen
-                    p1 = psnr(r.rgb, ref1, reg1)
+                    flat = flats.render_view(view, eye.position, scene.views[view], res, spp)
+                    ref1, reg1 = flat.rgb, region & (flat.coverage(view) >= FULL_COVERAGE)
+                    p1 = psnr(r.rgb, ref1, reg1, sampling_variance(r, flat))  # two renders' noise, shared in part
                     kind = REFERENCE_FLAT_PRINT
                 s = ssim(r.rgb, ref1, reg1)
                 coverage = float(cov.mean())

@@ -4,7 +4,7 @@ From an eye other than the design eye no print can show the designer's
 picture as drawn: a picture lying on the saucer is seen in that eye's
 perspective (the saucer's near edge, closer to the eye, moves more than its
 far edge: a shear of about 20 px across a 256 px frame for an eye 32 mm to
-the side, ``benchmarks/RESULTS.md``, Eyes), and in the mirror with that
+the side, ``benchmarks/results/HISTORY.md``, "Eyes (issue 19)"), and in the mirror with that
 eye's anamorphic distortion. A viewer takes both for the same picture. What
 a print can get wrong from there is what it adds to that: the relief's
 parallax (strokes breaking into slices at the wave ridges), colours placed
@@ -39,7 +39,14 @@ from pathlib import Path
 import numpy as np
 
 from saucerfab.verify.printfolder import CupSpec, PrintedSurface, ViewSpec
-from saucerfab.verify.raytrace import FULL_COVERAGE, PositionScene, PrintTracer, position_scene, render_positions
+from saucerfab.verify.raytrace import (
+    FULL_COVERAGE,
+    PositionScene,
+    PrintTracer,
+    ViewRender,
+    position_scene,
+    render_positions,
+)
 
 #: samples per pixel of the height pass: only the mean height over the view is kept
 HEIGHT_SPP = 4
@@ -169,8 +176,12 @@ class FlatPrints:
         the mirror for the others. A view the design eye did not see has no flat
         print: black, seen nowhere.
         """
+        r = self.render_view(name, eye, view, size, spp)
+        return r.rgb, r.coverage(name) >= FULL_COVERAGE
+
+    def render_view(self, name: str, eye: tuple[float, float, float], view: ViewSpec, size: int, spp: int) -> ViewRender:
+        """:meth:`render`'s whole render, with its sampling noise (:class:`~.raytrace.ViewRender`)."""
         if name not in self._tracers:
-            return np.zeros((size, size, 3), np.float32), np.zeros((size, size), bool)
-        r = self._tracers[name].render(eye, view, size, spp)
-        cov = r.direct if name == "direct" else r.reflected
-        return r.rgb, cov >= FULL_COVERAGE
+            black, nowhere = np.zeros((size, size, 3), np.float32), np.zeros((size, size), np.float32)
+            return ViewRender(black, nowhere, nowhere, black)
+        return self._tracers[name].render(eye, view, size, spp)

@@ -322,6 +322,22 @@ def folder_limits(folder: Path) -> Any:
     )
 
 
+def design_parameters(folder: Path) -> dict[str, Any]:
+    """The parameters of the design a print folder was exported from (``export.json``), or {} when unreadable.
+
+    Read with the same bound as ``scene.json``; what verify takes from it
+    (the eyes the design was made for) falls back to its defaults.
+    """
+    try:
+        path = folder / "export.json"
+        if path.stat().st_size > MAX_SCENE_JSON_BYTES:
+            return {}
+        params = json.loads(path.read_bytes().decode("utf-8"))["design"]["parameters"]
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError, KeyError, TypeError):
+        return {}
+    return params if isinstance(params, dict) else {}
+
+
 def read_surface(path: Path, fmt: str, scene: PrintScene, limits: Any = None) -> PrintedSurface:
     """Read one exported mesh file with its textures (bounded, as the checker reads).
 

@@ -23,6 +23,28 @@ as shading normals (Mitsuba's conductor reflects about the shading normal),
 so the reflection follows the smooth cup to well under a pixel; prism
 facets are flat.
 
+Scenes are built in the **render frame**, the file frame moved so the cup's
+axis at mid-height is the origin (:func:`render_origin`), the camera moved
+with it. Mitsuba traces in float32 and starts a ray leaving a surface at
+``p`` off it by ``(1 + max|p|) * RayEpsilon`` (8.9e-5) along the normal,
+which for the mirror is a wall that reflects as if it stood half that much
+further out: 5-8 um where an export puts the cup (its axis 150 mm from the
+origin), a reflected picture 0.02-0.07 px off at 256 px. Around the cup the
+offset is 3-5 um, and :func:`cup_mesh` sets the mirror inside the true wall
+by half of it, so the reflection is the true wall's (tested against an
+analytic reflection to 0.01 px).
+
+The colour pass is rendered as two independent halves (:data:`SAMPLER`,
+different seeds): the picture is their mean, and half their difference
+(:attr:`ViewRender.half_diff`) squared is an unbiased estimate of the
+render's own noise, which :func:`~saucerfab.verify.metrics.psnr` takes out
+of the error: a noisy render's squared error is its true error plus its
+noise variance, which at 16 samples per pixel read a photo 1.3 dB low.
+Two renders with the same seeds sample the same points of each pixel, so
+their noises are correlated and do not add: the variance of their
+difference is estimated by the square of the difference of their
+``half_diff`` (:func:`sampling_variance`).
+
 Mitsuba's CPU variant ``scalar_rgb`` is used: it runs everywhere (its
 ``llvm_ad_rgb`` variant needs an LLVM newer than some systems have).
 ``SAUCERFAB_MITSUBA_VARIANT`` picks another, e.g. ``cuda_ad_rgb`` on a GPU.
@@ -49,6 +71,11 @@ VARIANT_ENV = "SAUCERFAB_MITSUBA_VARIANT"
 CUP_SEGMENTS = 2048
 #: colour of faces without a texture (the default wall colour, 200/255)
 UNTEXTURED_RGB = (200 / 255,) * 3
+#: pixel sampler of the colour halves: Kensler's correlated multi-jitter, a stratified
+#: a x b grid (Mitsuba's ``stratified`` takes only squares, and 8, the default's half, is not one)
+SAMPLER = "multijitter"
+#: pixel sampler of the coverage and position passes
+COVERAGE_SAMPLER = "stratified"
 #: Mitsuba's direct-illumination integrator, sampling BSDFs only: a camera ray
 #: returns the emission it hits plus the emission along its BSDF-sampled ray,
 #: which for the mirror (a delta lobe) is the reflected saucer and for the
@@ -96,11 +123,60 @@ class ViewRender:
         direct: (S, S) float32 in [0, 1], share of each pixel where the
             saucer's top is seen directly.
         reflected: (S, S) float32 in [0, 1], share seen in the mirror.
+        half_diff: (S, S, 3) float32, half the difference of the colour
+            pass's two halves (:func:`colour_halves`): its square is an
+            unbiased estimate of the variance of ``rgb`` from sampling; zero
+            where the render has a single sample per pixel and no estimate.
     """
 
     rgb: np.ndarray
     direct: np.ndarray
     reflected: np.ndarray
+    half_diff: np.ndarray
+
+    def coverage(self, view: str) -> np.ndarray:
+        """(S, S) share of each pixel where the top is seen the view's way: directly for ``direct``, else in the mirror."""
+        return self.direct if view == "direct" else self.reflected
+
+
+def sampling_variance(*renders: ViewRender) -> np.ndarray:
+    """(S, S, 3) unbiased estimate of the sampling variance of one render's ``rgb``, or of two renders' difference.
+
+    Two renders of one view with the same seed share their samples'
+    positions in each pixel: the differences of their halves are two
+    independent estimates of their difference, and half the difference of
+    those, squared, estimates its variance. (Adding the two renders' own variances would count the
+    noise they share, and read two alike renders as identical.)
+    """
+    if len(renders) == 1:
+        return np.square(renders[0].half_diff)
+    a, b = renders
+    return np.square(a.half_diff - b.half_diff)
+
+
+def render_origin(cup: CupSpec) -> np.ndarray:
+    """(3,) mm, file frame: the point the render frame puts at the origin, the cup's axis at mid-height.
+
+    Mitsuba's offset of a ray leaving the mirror grows with the hit point's
+    largest coordinate (module docstring): centred on the cup it is 3-5 um
+    wherever the file placed the print.
+    """
+    return np.array([cup.center[0], cup.center[1], cup.bottom_z + cup.height / 2.0])
+
+
+def colour_halves(spp: int) -> int:
+    """Samples per pixel of each of the colour pass's two halves; 0 for one pass of ``spp`` (``spp`` < 2).
+
+    Half of ``spp`` rounded down to a count :data:`SAMPLER` takes as it is
+    (its grid is ``a x b``, ``a = isqrt(n)``; Mitsuba would round any other
+    count up, with a warning): ``spp / 2`` for every even ``spp`` up to 16
+    (the defaults 16 and 4), 30 for 64.
+    """
+    half = int(spp) // 2
+    if half < 1:
+        return 0
+    a = math.isqrt(half)
+    return a * (half // a)
 
 
 def _mesh(
@@ -142,38 +218,81 @@ def _mesh(
     return m
 
 
-def cup_mesh(cup: CupSpec, segments: int = CUP_SEGMENTS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def cup_mesh(
+    cup: CupSpec, segments: int = CUP_SEGMENTS, *, origin: np.ndarray | None = None, ray_epsilon: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The cup's mirror wall as triangles with outward shading normals.
 
-    Each straight piece of the wall (:meth:`saucerfab.cups.Cup.wall`) is a
-    quad with four corners of its own, so a facet keeps its flat normal and
-    a smooth cup's normals, equal at the shared edges, shade smoothly.
+    Each straight piece of the wall (:meth:`saucerfab.cups.Cup.wall`) is cut
+    into three quads of its own at ``|z| = max(|x|, |y|)`` (render frame), so
+    a facet keeps its flat normal, a smooth cup's normals, equal at the
+    shared edges, shade smoothly, and the inset below is linear over every
+    triangle.
+
+    Args:
+        origin: (3,) mm, file frame: the point put at the origin (default: none, the file frame).
+        ray_epsilon: the renderer's ``RayEpsilon``. Mitsuba starts the ray
+            leaving the mirror at ``p`` from ``p + m n``, ``m = (1 + max|p|) *
+            ray_epsilon``. A wall set in by ``s`` meets a ray ``s / cos(i)``
+            further on, and the reflected ray started from there ``m`` out is
+            the true wall's, moved by ``(m - 2 s) n`` across it: each vertex is
+            set in by ``m / 2`` along its piece's normal, and the mirror
+            reflects as the true wall (0 leaves the wall where it is).
 
     Returns:
         positions (V, 3) mm, faces (F, 3), normals (V, 3) unit, outward.
     """
+    o = np.zeros(3) if origin is None else np.asarray(origin, np.float64)
     wall = cup.outline.wall(segments)  # (S, 2, 4): [x, y, nx, ny] at each piece's two ends
-    z0, z1 = cup.bottom_z, cup.bottom_z + cup.height
-    xy = wall[:, :, :2] + np.asarray(cup.center)
-    n = np.concatenate([wall[:, :, 2:], np.zeros((len(wall), 2, 1))], axis=2)
-    a, b = xy[:, 0], xy[:, 1]
-    pos = np.stack([np.c_[a, np.full(len(a), z0)], np.c_[b, np.full(len(a), z0)],
-                    np.c_[b, np.full(len(a), z1)], np.c_[a, np.full(len(a), z1)]], axis=1).reshape(-1, 3)
-    normals = np.stack([n[:, 0], n[:, 1], n[:, 1], n[:, 0]], axis=1).reshape(-1, 3)
-    base = 4 * np.arange(len(wall))[:, None]
+    xy = wall[:, :, :2] + np.asarray(cup.center) - o[:2]  # (S, 2, 2)
+    z0, z1 = cup.bottom_z - o[2], cup.bottom_z + cup.height - o[2]
+    kink = np.abs(xy).max(axis=2)  # (S, 2): where |z| takes over max|p|
+    levels = np.stack([np.full_like(kink, z0), np.clip(-kink, z0, z1), np.clip(kink, z0, z1),
+                       np.full_like(kink, z1)], axis=2)  # (S, 2 ends, 4)
+    # quad k of a piece: end 0 and end 1 at levels k and k + 1, corners (a_k, b_k, b_k+1, a_k+1)
+    ends, steps = np.array([0, 1, 1, 0]), np.array([0, 0, 1, 1])
+    k = np.arange(3)[:, None] + steps  # (3, 4)
+    z = levels[:, ends[None, :], k]  # (S, 3, 4)
+    pos = np.concatenate([np.broadcast_to(xy[:, None, ends], z.shape + (2,)), z[..., None]], axis=3)
+    normals = np.broadcast_to(np.concatenate([wall[:, :, 2:], np.zeros((len(wall), 2, 1))], 2)[:, None, ends], pos.shape)
+    if ray_epsilon > 0.0:
+        edge = xy[:, 1] - xy[:, 0]
+        flat = np.stack([edge[:, 1], -edge[:, 0]], 1) / np.linalg.norm(edge, axis=1, keepdims=True)
+        flat *= np.sign(np.sum(flat * wall[:, :, 2:].sum(1), axis=1, keepdims=True))  # outward
+        inset = 0.5 * (1.0 + np.abs(pos).max(axis=3)) * ray_epsilon  # (S, 3, 4), mm
+        pos = pos.copy()
+        pos[..., :2] -= inset[..., None] * flat[:, None, None, :]
+    pos, normals = pos.reshape(-1, 3), np.ascontiguousarray(normals).reshape(-1, 3)
+    base = 4 * np.arange(len(wall) * 3)[:, None]
     faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
-    return pos, faces, normals
+    # a quad cut off at the wall's top or bottom has no height at one end or both
+    zq = z.reshape(-1, 4)
+    keep = np.concatenate([zq[:, 2] > zq[:, 1], zq[:, 3] > zq[:, 0]])
+    return pos, faces[keep], normals
 
 
-def _cap(cup: CupSpec) -> tuple[np.ndarray, np.ndarray]:
-    """A disc closing the cup's top (what is inside the cup is not the mirror)."""
-    pos, _, _ = cup_mesh(cup, segments=256)
-    ring = pos.reshape(-1, 4, 3)[:, 3]  # each piece's first end, at the top
-    centre = np.array([[*cup.center, cup.bottom_z + cup.height]])
-    p = np.concatenate([centre, ring])
+def _cap(cup: CupSpec, origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A disc closing the cup's top (what is inside the cup is not the mirror), render frame."""
+    ring = cup.outline.wall(256)[:, 0, :2] + np.asarray(cup.center)  # each piece's first end
+    top = cup.bottom_z + cup.height
+    p = np.concatenate([[[*cup.center, top]], np.c_[ring, np.full(len(ring), top)]]) - origin
     k = np.arange(1, len(p))
     f = np.stack([np.zeros_like(k), k, np.where(k + 1 < len(p), k + 1, 1)], 1)
     return p, f
+
+
+#: the BSDF of every surface but the mirror: black, so a pixel shows only what is emitted
+BLACK = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
+#: the cup: a perfect mirror (reflectance 1)
+MIRROR = {"type": "conductor", "material": "none"}
+
+
+def _cup_meshes(mi: Any, cup: CupSpec, origin: np.ndarray, mirror: dict[str, Any]) -> dict[str, Any]:
+    """The mirror wall (its BSDF ``mirror``) and its black lid, as scene entries in the render frame."""
+    cpos, cfaces, cnorm = cup_mesh(cup, origin=origin, ray_epsilon=float(mi.math.RayEpsilon))
+    cap_p, cap_f = _cap(cup, origin)
+    return {"cup": _mesh(mi, "cup", cpos, cfaces, bsdf=mirror, normals=cnorm),
+            "cup_top": _mesh(mi, "cup_top", cap_p, cap_f, bsdf=BLACK)}
 
 
 class PrintTracer:
@@ -187,10 +306,10 @@ class PrintTracer:
     def __init__(self, surface: PrintedSurface, cup: CupSpec) -> None:
         mi = mitsuba()
         self._mi = mi
-        black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
+        self._origin = render_origin(cup)
         # one vertex per face corner: a corner's texture coordinate belongs to its face
         faces = surface.faces
-        corners = surface.vertices[faces].reshape(-1, 3)
+        corners = surface.vertices[faces].reshape(-1, 3) - self._origin
         # Mitsuba's bitmap has v = 0 at the image's top row; the files' v runs bottom -> top
         uv = surface.corner_uv.reshape(-1, 2) * (1.0, -1.0) + (0.0, 1.0)
         colour: dict[str, Any] = {"type": "scene"}
@@ -214,20 +333,15 @@ class PrintTracer:
                 else:
                     radiance = {"type": "rgb", "value": list(UNTEXTURED_RGB)}
                 key = f"part_{'top' if is_top else 'rest'}_{int(tex_id) + 1}"
-                colour[key] = _mesh(mi, key, pos, tri, bsdf=black, uv=uv[idx],
+                colour[key] = _mesh(mi, key, pos, tri, bsdf=BLACK, uv=uv[idx],
                                     emitter={"type": "area", "radiance": radiance})
                 cover[key] = _mesh(
-                    mi, key, pos, tri, bsdf=black,
+                    mi, key, pos, tri, bsdf=BLACK,
                     emitter={"type": "area", "radiance": {"type": "rgb", "value": [1.0, 1.0, 0.0]}} if is_top else None,
                 )
-        cpos, cfaces, cnorm = cup_mesh(cup)
-        cap_p, cap_f = _cap(cup)
-        mirror = {"type": "conductor", "material": "none"}
-        green = {"type": "conductor", "material": "none", "specular_reflectance": {"type": "rgb", "value": [0.0, 1.0, 0.0]}}
-        colour["cup"] = _mesh(mi, "cup", cpos, cfaces, bsdf=mirror, normals=cnorm)
-        cover["cup"] = _mesh(mi, "cup", cpos, cfaces, bsdf=green, normals=cnorm)
-        colour["cup_top"] = _mesh(mi, "cup_top", cap_p, cap_f, bsdf=black)
-        cover["cup_top"] = _mesh(mi, "cup_top", cap_p, cap_f, bsdf=black)
+        green = {**MIRROR, "specular_reflectance": {"type": "rgb", "value": [0.0, 1.0, 0.0]}}
+        colour.update(_cup_meshes(mi, cup, self._origin, MIRROR))
+        cover.update(_cup_meshes(mi, cup, self._origin, green))
         for d in (colour, cover):
             d["integrator"] = INTEGRATOR
         self._colour = mi.load_dict(colour)
@@ -240,18 +354,35 @@ class PrintTracer:
         The camera follows :mod:`saucerfab.render.camera`: a look-at from the
         eye to the view's target with z up, square frame, half angle
         ``view.viewing_angle_deg``; row 0 at the top, +x of the view to the right.
+        The colour pass is two renders of :func:`colour_halves` samples per
+        pixel (seeds ``2 seed`` and ``2 seed + 1``): ``rgb`` is their mean and
+        ``half_diff`` half their difference, whose square's expectation is
+        the variance of that mean.
         """
         mi = self._mi
-        sensor = _sensor(mi, eye, view, size, spp, self.extent_mm)
-        rgb = np.array(mi.render(self._colour, sensor=sensor, spp=int(spp), seed=seed), dtype=np.float32)
+        half = colour_halves(spp)
+
+        def colour(n: int, s: int) -> np.ndarray:
+            sensor = _sensor(mi, eye, view, size, n, self.extent_mm, self._origin, SAMPLER)
+            return np.array(mi.render(self._colour, sensor=sensor, spp=n, seed=s), dtype=np.float32)
+
+        if half:
+            a, b = colour(half, 2 * seed), colour(half, 2 * seed + 1)
+            rgb, half_diff = 0.5 * (a + b), 0.5 * (a - b)
+        else:
+            rgb = colour(int(spp), 2 * seed)
+            half_diff = np.zeros_like(rgb)
+        sensor = _sensor(mi, eye, view, size, int(spp), self.extent_mm, self._origin)
         cov = np.array(mi.render(self._cover, sensor=sensor, spp=int(spp), seed=seed), dtype=np.float32)
         direct = np.clip(cov[..., 0], 0.0, 1.0)
         reflected = np.clip(cov[..., 1] - cov[..., 0], 0.0, 1.0)
-        return ViewRender(np.clip(rgb, 0.0, 1.0), direct, reflected)
+        return ViewRender(np.clip(rgb, 0.0, 1.0), direct, reflected, half_diff)
 
 
-def _sensor(mi: Any, eye: tuple[float, float, float], view: ViewSpec, size: int, spp: int, extent_mm: float) -> Any:
-    """The camera of :mod:`saucerfab.render.camera`: a look-at from ``eye`` to the view's target, z up, square."""
+def _sensor(mi: Any, eye: tuple[float, float, float], view: ViewSpec, size: int, spp: int, extent_mm: float,
+            origin: np.ndarray, sampler: str = COVERAGE_SAMPLER) -> Any:
+    """The camera of :mod:`saucerfab.render.camera` in the render frame (``origin`` at 0): a look-at
+    from ``eye`` to the view's target, z up, square."""
     dist = math.dist(eye, view.target)
     return mi.load_dict(
         {
@@ -260,10 +391,11 @@ def _sensor(mi: Any, eye: tuple[float, float, float], view: ViewSpec, size: int,
             "fov_axis": "x",
             "near_clip": max(1e-3, dist * 1e-4),
             "far_clip": dist * 10 + extent_mm * 10,
-            "to_world": mi.ScalarTransform4f().look_at(origin=list(eye), target=list(view.target), up=[0, 0, 1]),
+            "to_world": mi.ScalarTransform4f().look_at(origin=list(np.subtract(eye, origin)),
+                                                        target=list(np.subtract(view.target, origin)), up=[0, 0, 1]),
             "film": {"type": "hdrfilm", "width": int(size), "height": int(size), "pixel_format": "rgb",
                      "rfilter": {"type": "box"}},
-            "sampler": {"type": "stratified", "sample_count": int(spp)},
+            "sampler": {"type": sampler, "sample_count": int(spp)},
         }
     )
 
@@ -276,13 +408,17 @@ POSITION_OFFSET = 0.25
 
 @dataclass(frozen=True)
 class PositionScene:
-    """A mesh that emits its own coordinates, with the mirror cup: see :func:`position_scene`."""
+    """A mesh that emits its own coordinates, with the mirror cup: see :func:`position_scene`.
+
+    ``origin``: (3,) mm, the file-frame point at the render frame's origin (:func:`render_origin`).
+    """
 
     scene: Any
     axes: tuple[int, int]
     low: np.ndarray
     span: float
     extent_mm: float
+    origin: np.ndarray
 
 
 def position_scene(vertices: np.ndarray, faces: np.ndarray, cup: CupSpec, axes: tuple[int, int] = (0, 1)) -> PositionScene:
@@ -292,32 +428,25 @@ def position_scene(vertices: np.ndarray, faces: np.ndarray, cup: CupSpec, axes: 
         vertices: (V, 3) mm. faces: (F, 3). axes: the two coordinates emitted (0 x, 1 y, 2 z).
     """
     mi = mitsuba()
-    black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
+    origin = render_origin(cup)
     used = np.unique(faces)
     low = vertices[used].min(axis=0)
     span = float(max(np.ptp(vertices[used], axis=0).max(), 1e-9))
     props = mi.Properties()
-    props["bsdf"] = mi.load_dict(black)
+    props["bsdf"] = mi.load_dict(BLACK)
     props["emitter"] = mi.load_dict({"type": "area", "radiance": {"type": "mesh_attribute", "name": "vertex_color"}})
     m = mi.Mesh("positions", vertex_count=int(vertices.shape[0]), face_count=int(faces.shape[0]), props=props)
     p = mi.traverse(m)
-    p["vertex_positions"] = type(p["vertex_positions"])(np.ascontiguousarray(vertices, np.float32).ravel())
+    p["vertex_positions"] = type(p["vertex_positions"])(np.ascontiguousarray(vertices - origin, np.float32).ravel())
     p["faces"] = type(p["faces"])(np.ascontiguousarray(faces, np.uint32).ravel())
     p.update()
     code = np.ones((vertices.shape[0], 3), np.float64)
     for k, a in enumerate(axes):
         code[:, k] = (vertices[:, a] - low[a]) / span + POSITION_OFFSET
     m.add_attribute("vertex_color", 3, [float(v) for v in code.astype(np.float32).ravel()])
-    cpos, cfaces, cnorm = cup_mesh(cup)
-    cap_p, cap_f = _cap(cup)
-    scene = mi.load_dict({
-        "type": "scene",
-        "integrator": INTEGRATOR,
-        "positions": m,
-        "cup": _mesh(mi, "cup", cpos, cfaces, bsdf={"type": "conductor", "material": "none"}, normals=cnorm),
-        "cup_top": _mesh(mi, "cup_top", cap_p, cap_f, bsdf=black),
-    })
-    return PositionScene(scene, axes, low, span, float(np.ptp(vertices[used], axis=0).max()))
+    scene = mi.load_dict({"type": "scene", "integrator": INTEGRATOR, "positions": m,
+                          **_cup_meshes(mi, cup, origin, MIRROR)})
+    return PositionScene(scene, axes, low, span, float(np.ptp(vertices[used], axis=0).max()), origin)
 
 
 def render_positions(ps: PositionScene, eye: tuple[float, float, float], view: ViewSpec, size: int, spp: int) -> dict[str, np.ndarray]:
@@ -328,7 +457,8 @@ def render_positions(ps: PositionScene, eye: tuple[float, float, float], view: V
         and where nothing is seen); ``full``: (S, S) bool, seen over the pixel's whole area.
     """
     mi = mitsuba()
-    img = np.array(mi.render(ps.scene, sensor=_sensor(mi, eye, view, size, spp, ps.extent_mm), spp=int(spp)), np.float64)
+    sensor = _sensor(mi, eye, view, size, spp, ps.extent_mm, ps.origin)
+    img = np.array(mi.render(ps.scene, sensor=sensor, spp=int(spp)), np.float64)
     cov = img[..., 2]
     full = cov >= FULL_COVERAGE
     xyz = np.full(img.shape[:2] + (3,), np.nan)
