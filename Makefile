@@ -20,7 +20,7 @@ $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 	if [ -n "$(TORCH)" ]; then $(PIP) install -q $(TORCH); fi
-	$(PIP) install -q -e '.[dev,cluster]'
+	$(PIP) install -q -e '.[all,dev]'
 	# compile the numba kernels once (cached beside the sources), so the first
 	# design or export does not pay for it
 	$(PY) -m saucerfab.warmup

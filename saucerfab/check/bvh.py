@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from saucerfab.check.jit import have_numba
+
 #: meshes with at least this many triangles use the numba kernels of :mod:`saucerfab.check.kernels`
 #: (importing numba costs ~0.7 s of start-up: below this, numpy is done sooner)
 FAST_FROM_TRIANGLES = 200_000
@@ -202,7 +204,7 @@ class BVH:
         large tree, :meth:`pair_chunks_numpy` below it: the same pairs (in
         another order) and the same budget rule.
         """
-        if int((self.leaf_tri >= 0).sum()) < FAST_FROM_TRIANGLES or self.flat_lo is None:
+        if int((self.leaf_tri >= 0).sum()) < FAST_FROM_TRIANGLES or self.flat_lo is None or not have_numba():
             yield from self.pair_chunks_numpy(tol, budget, chunk)
             return
         from saucerfab.check.kernels import pair_search

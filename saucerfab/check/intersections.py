@@ -18,6 +18,7 @@ import numpy as np
 
 from saucerfab.check import bvh as bvh_mod
 from saucerfab.check.bvh import BVH, cross3, dot3, pair_intersections, query_workers
+from saucerfab.check.jit import have_numba
 from saucerfab.check.limits import Limits
 from saucerfab.check.places import fmt_pt, where
 from saucerfab.check.report import Finding, finding
@@ -45,7 +46,7 @@ def self_intersections(bvh: BVH, tri: np.ndarray, Fg: np.ndarray, gidx: np.ndarr
 
     nrm = cross3(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     exact = lambda a, b: pair_intersections(tri, Fg, nrm, a, b, eps)
-    if m >= bvh_mod.FAST_FROM_TRIANGLES:
+    if m >= bvh_mod.FAST_FROM_TRIANGLES and have_numba():
         # the same test pair by pair in numba: no temporaries per stage, and a flat bottom's millions of
         # coplanar neighbour pairs (sector and fold tests) cost microseconds each, not numpy passes
         from saucerfab.check.kernels import pair_intersections_fast

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from saucerfab.check.jit import have_numba
+
 
 def weld(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(unique positions (k, 3), map (n,) from each vertex to its unique one), exact equality.
@@ -36,7 +38,7 @@ def components(n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """
     from saucerfab.check.bvh import FAST_FROM_TRIANGLES
 
-    if len(u) >= 3 * FAST_FROM_TRIANGLES:
+    if len(u) >= 3 * FAST_FROM_TRIANGLES and have_numba():
         from saucerfab.check.kernels import components_uf
 
         return components_uf(n, np.ascontiguousarray(u, dtype=np.int64), np.ascontiguousarray(v, dtype=np.int64))

@@ -44,15 +44,20 @@ def _available() -> dict[str, object]:
 
 
 def version_text() -> str:
-    """saucerfab, Python and torch versions, and the compute device in use."""
+    """saucerfab, Python and torch versions, and the compute device in use (torch's; "none" without torch)."""
     import platform
 
+    from saucerfab.extras import installed, pip_line
+
+    head = [f"saucerfab {__version__}", f"Python {platform.python_version()}"]
+    if not installed("torch"):  # the checker's install (no 'design' extra): the versions still print
+        return "\n".join(head + [f"torch not installed (design and export need it: {pip_line('design')})",
+                                 "device none (the checker runs on the CPU without torch)"])
     import torch
 
     gpu = torch.cuda.is_available()
     dev = f"GPU ({torch.cuda.get_device_name(0)})" if gpu else "CPU (no CUDA GPU found)"
-    return "\n".join([f"saucerfab {__version__}", f"Python {platform.python_version()}",
-                      f"torch {torch.__version__}", f"device {dev}"])
+    return "\n".join(head + [f"torch {torch.__version__}", f"device {dev}"])
 
 
 class _VersionAction(argparse.Action):

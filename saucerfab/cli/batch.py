@@ -91,6 +91,12 @@ def run(args: argparse.Namespace) -> int:
                 what = f"would fail: {p.result.reason}"
             print(f"{p.job.id:24s} {p.job.kind:6s} {what}")
         return 0 if all(p.action != "failed" for p in plan) else 1
+    from saucerfab.extras import require
+
+    # every job exports and verifies (a dry run only reads the manifest and the inputs: the base install)
+    require("design", "verify")
+    if args.scheduler:
+        require("cluster", subject="--scheduler")
     workers = args.workers
     if workers is None and not args.scheduler:
         workers = max(1, min(os.cpu_count() or 1, len(manifest.jobs)))

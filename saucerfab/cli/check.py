@@ -64,15 +64,56 @@ def _keep_freed_memory() -> None:
         pass
 
 
+#: most entries of a zip in a folder that are listed to see whether it holds a mesh (a bureau's zipped OBJ
+#: holds three; a larger archive is passed to the checker, which judges it within its own limits)
+MAX_ZIP_ENTRIES_LISTED = 1000
+
+
+def _zip_holds_a_mesh(path: object) -> bool:
+    """Whether a zip found in a folder holds a mesh file (its entry names only; nothing is unpacked).
+
+    A zip that cannot be listed, or lists more than
+    :data:`MAX_ZIP_ENTRIES_LISTED` entries, is kept: the checker reads it
+    within its limits and says what is wrong with it.
+    """
+    import zipfile
+
+    from saucerfab.formats import SUFFIXES
+
+    try:
+        with zipfile.ZipFile(path) as zf:  # type: ignore[arg-type]
+            infos = zf.infolist()
+    except (OSError, zipfile.BadZipFile, ValueError, RuntimeError):
+        return True
+    if len(infos) > MAX_ZIP_ENTRIES_LISTED:
+        return True
+    return any(i.filename.lower().endswith(tuple(SUFFIXES)) for i in infos)
+
+
+def _folder_meshes(folder: object) -> list[str]:
+    """The mesh files directly in ``folder``, sorted: a reader's suffix, or a zip holding a mesh."""
+    from pathlib import Path
+
+    from saucerfab.formats import SUFFIXES
+
+    found = []
+    for p in sorted(Path(folder).iterdir()):  # type: ignore[arg-type]
+        suffix = p.suffix.lower()
+        if p.is_file() and (suffix in SUFFIXES and suffix != ".zip" or suffix == ".zip" and _zip_holds_a_mesh(p)):
+            found.append(str(p))
+    return found
+
+
 def expand_files(given: list[str]) -> list[str]:
     """The mesh files ``given`` names: files as they are, a folder's mesh files, a glob's matches; in order.
 
     A folder gives every file directly in it whose suffix a checker reader
-    takes (:data:`saucerfab.formats.SUFFIXES`) or ``.zip`` (an OBJ zipped with
-    its side files), sorted by name; not its subfolders (an export's print set
-    is its top level). A name that does not exist and holds ``*``, ``?`` or
-    ``[`` is a glob pattern (sorted matches). Anything else is passed on as
-    it is, so a missing file is reported as unreadable like any other.
+    takes (:data:`saucerfab.formats.SUFFIXES`), and every ``.zip`` whose
+    entries hold one (an OBJ zipped with its side files), sorted by name; not
+    its subfolders (an export's print set is its top level). A name that does
+    not exist and holds ``*``, ``?`` or ``[`` is a glob pattern: its matches,
+    sorted, each a file or a folder as above. Anything else is passed on as it
+    is, so a missing file is reported as unreadable like any other.
 
     Raises:
         ConfigError: a folder with no mesh file, or a pattern that matches nothing.
@@ -83,23 +124,25 @@ def expand_files(given: list[str]) -> list[str]:
     from saucerfab.errors import ConfigError
     from saucerfab.formats import SUFFIXES
 
+    def one(name: str) -> list[str]:
+        if not Path(name).is_dir():
+            return [name]
+        found = _folder_meshes(name)
+        if not found:
+            raise ConfigError(f"folder {name!r} holds no mesh file ({', '.join(sorted(SUFFIXES))}, or a zip of one); "
+                              "give the folder an export wrote, or the files themselves")
+        return found
+
     out: list[str] = []
     for name in given:
-        path = Path(name)
-        if path.is_dir():
-            found = sorted(str(p) for p in path.iterdir()
-                           if p.is_file() and (p.suffix.lower() in SUFFIXES or p.suffix.lower() == ".zip"))
-            if not found:
-                raise ConfigError(f"folder {name!r} holds no mesh file ({', '.join(sorted(SUFFIXES))}, .zip); "
-                                  "give the folder an export wrote, or the files themselves")
-            out += found
-        elif not path.exists() and glob.has_magic(name):
-            found = sorted(glob.glob(name))
-            if not found:
+        if not Path(name).exists() and glob.has_magic(name):
+            matches = sorted(glob.glob(name))
+            if not matches:
                 raise ConfigError(f"no file matches {name!r}; check the pattern (quote it so the shell leaves it)")
-            out += found
+            for m in matches:
+                out += _folder_meshes(m) if Path(m).is_dir() else [m]  # a matched folder with no mesh: nothing
         else:
-            out.append(name)
+            out += one(name)
     return list(dict.fromkeys(out))  # a file named twice (a folder and a glob) is checked once
 
 

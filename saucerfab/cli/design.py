@@ -196,6 +196,11 @@ def _json_summary(out: object, meta: dict) -> dict:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from saucerfab.extras import require, require_verify
+
+    require("design")  # a missing extra is said now, not by an import minutes into the design
+    require_verify(args.no_verify)
+
     from saucerfab.optimize.pipeline import check_output_folder, run_design
     from saucerfab.optimize.request import DesignRequest
 

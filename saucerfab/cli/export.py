@@ -174,6 +174,11 @@ def check_other_export(design: str, out: str, force: bool) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from saucerfab.extras import require, require_verify
+
+    require("design")  # the fabrication: said now, not by an import halfway through
+    require_verify(args.no_verify)
+
     from saucerfab.fabricate.pipeline import export_lock
 
     given = given_options(args)
@@ -257,13 +262,15 @@ def _run_locked(args: argparse.Namespace, given: dict[str, Any]) -> int:
     if checks:
         print("  check")
         for path, rep in checks:
+            name = path.relative_to(result.out).as_posix() if path.is_relative_to(result.out) else path.name
             if rep is None:
-                print(f"    {path.name:28s} not checked: saucerfab.check is not installed")
+                print(f"    {name:28s} not checked: saucerfab.check is not installed")
                 continue
             findings = list(getattr(rep, "findings", []))
             errors = sum(1 for f in findings if getattr(f, "severity", "") == "error")
             warns = sum(1 for f in findings if getattr(f, "severity", "") == "warning")
-            print(f"    {path.name:28s} {rep.verdict} ({errors} errors, {warns} warnings)")
+            outside = " (outside the print set: checked without the printer)" if path.parent != result.out else ""
+            print(f"    {name:28s} {rep.verdict} ({errors} errors, {warns} warnings){outside}")
             for f in findings:
                 if getattr(f, "severity", "") in ("error", "warning"):
                     print(f"      {f.severity}: {getattr(f, 'message', f)}")

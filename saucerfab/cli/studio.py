@@ -30,6 +30,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from saucerfab.extras import require
+
+    require("studio", "design", "verify")  # the server, and the designs and exports it runs
+
     from saucerfab.studio.server import serve
 
     return serve(args.workspace, host=args.host, port=args.port, jobs=args.jobs,

@@ -21,7 +21,7 @@ attribute block of deltas (at most 64 KiB), a filtered copy of the output, or 4 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from saucerfab.check.jit import njit  # numba's; plain Python where numba is not installed
 
 
 class MeshoptError(ValueError):

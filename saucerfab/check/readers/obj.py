@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from saucerfab.check.jit import have_numba
 from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import MeshBuilder, MeshData, ReadError, TextureInfo
 from saucerfab.check.readers.safe import DiskResources, Resources
@@ -52,6 +53,8 @@ def _try_fast_parser(n_bytes: int) -> bool:
     """Whether :func:`read_obj` tries :mod:`.obj_fast` on a file of ``n_bytes`` (the one place that decides)."""
     from saucerfab.warmup import numba_started
 
+    if not have_numba():  # the checker's install without the 'design' extra: the numpy/regex parser reads all
+        return False
     return n_bytes >= FAST_OBJ_BYTES or (n_bytes >= FAST_OBJ_BYTES_WARM and numba_started())
 
 

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from saucerfab.check.jit import have_numba
 from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import ReadError
 from saucerfab.check.readers.threemf_grammar import ATTR, END, TRI_ATTR_ORDER, WS, element_res
@@ -211,7 +212,7 @@ FAST_3MF_BLOCK_BYTES = 256 << 10
 
 def _use_fast(part_bytes: int) -> bool:
     loaded = sys.modules.get("saucerfab.check.readers.threemf_fast")
-    return part_bytes >= FAST_3MF_PART_BYTES or (loaded is not None and loaded.ready())
+    return (part_bytes >= FAST_3MF_PART_BYTES and have_numba()) or (loaded is not None and loaded.ready())
 
 
 def _parse_block(kind: str, content: bytes, prefix: bytes, fast: bool = False) -> Any:
