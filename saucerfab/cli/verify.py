@@ -7,8 +7,10 @@ Writes the pictures (ray-traced view, reference, difference heat map) and
 earlier verify there is replaced as a whole), or into ``--out DIR`` (an
 earlier verify there is replaced only with ``--force``, the rule of every
 command that writes). Exit code: 0 every view passed, 1 some view
-is under ``--min-psnr`` or ``--min-coverage``, 2 the folder or its files
-cannot be read (nothing is written then).
+is under ``--min-psnr`` or ``--min-coverage``, or a whole view's stray share
+is over ``--max-stray``, 2 the folder or its files cannot be read (nothing
+is written then). Without ``--eyes``, the eyes the design was made for
+(else the design eye and a viewer's two).
 """
 
 from __future__ import annotations
@@ -31,10 +33,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from saucerfab.verify.eyes import DEFAULT_IPD_MM
 
     p.add_argument("folder", nargs="?", metavar="PRINT_DIR", help="a folder written by 'saucerfab export'")
-    p.add_argument("--eyes", default="both", metavar="MODE",
-                   help="design (the design eye alone), both (it and a viewer's two eyes, the default) or "
+    p.add_argument("--eyes", default=None, metavar="MODE",
+                   help="default: the eyes the design was made for (its --eyes), else both. "
+                        "design (the design eye alone), both (it and a viewer's two eyes) or "
                         "box:W,H[,N] (it and an N x N grid over W x H mm facing the saucer)")
-    p.add_argument("--ipd-mm", type=float, default=DEFAULT_IPD_MM,
+    p.add_argument("--ipd-mm", type=float, default=None,
                    help=f"distance between the viewer's eyes for --eyes both (default {DEFAULT_IPD_MM:g} mm)")
     p.add_argument("--res", type=int, default=DEFAULT_RES, help=f"render size in pixels per side (default {DEFAULT_RES})")
     p.add_argument("--spp", type=int, default=DEFAULT_SPP, help=f"samples per pixel (default {DEFAULT_SPP})")
@@ -42,11 +45,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"pass level of every view from every eye, dB (default {DEFAULT_MIN_PSNR_DB:g})")
     p.add_argument("--min-coverage", type=float, default=DEFAULT_MIN_COVERAGE,
                    help=f"least share of each view's frame the saucer must fill (default {DEFAULT_MIN_COVERAGE:g})")
+    from saucerfab.verify.wholeview import DEFAULT_MAX_STRAY, STRAY_DISTANCE, TARGET_MAX_STRAY
+
+    p.add_argument("--max-stray", type=float, default=DEFAULT_MAX_STRAY,
+                   help=f"highest stray share of the whole view from every eye: the share of the saucer seen outside "
+                        f"a frame (directly, or in the mirror) farther than {STRAY_DISTANCE:g} from the background "
+                        f"(default {DEFAULT_MAX_STRAY:g}, lenient; the aim is {TARGET_MAX_STRAY:g})")
     p.add_argument("--primary-only", action="store_true",
                    help="render only the first of OBJ, 3MF, GLB (the others are rendered from the design eye by default)")
     p.add_argument("-o", "--out", metavar="DIR", help="where to write the pictures and verify.json (default PRINT_DIR/verify)")
     p.add_argument("--force", action="store_true", help="replace an earlier verify in --out")
-    p.add_argument("--json", action="store_true", help="print the saucerfab.verify/2 JSON document on stdout")
+    p.add_argument("--json", action="store_true", help="print the saucerfab.verify/3 JSON document on stdout")
     add_schema_flag(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
 
@@ -76,9 +85,20 @@ def print_scores(result, out=None) -> None:  # type: ignore[no-untyped-def]
             psnr = "   -- " if v.psnr_db != v.psnr_db else f"{v.psnr_db:5.1f}"
             print(f"    {v.view:10s} {v.eye:8s} {psnr} dB  SSIM {v.ssim:4.2f}  coverage {v.coverage * 100:5.1f}%  "
                   f"{'ok' if v.passed else 'LOW'}{shift}", file=out)
+    if result.whole_views:
+        print("  the whole view (everything the eye sees of the piece; stray: the saucer outside the frames far from "
+              "the background)", file=out)
+
+    def pct(x: float) -> str:
+        return "  --" if x != x else f"{x * 100:3.0f}%"
+
+    for w in result.whole_views:
+        psnr = "   -- " if w.psnr_db != w.psnr_db else f"{w.psnr_db:5.1f}"
+        print(f"    whole      {w.eye:8s} {psnr} dB  stray: saucer {pct(w.stray_direct)}, mirror {pct(w.stray_reflected)}  "
+              f"reflected picture {pct(w.width_share)} of the cup's width  {'ok' if w.passed else 'STRAY'}", file=out)
     verdict = "every view passes" if result.passed else "some views are under the levels"
-    print(f"  {verdict} (min {result.min_psnr_db:g} dB, coverage {result.min_coverage * 100:g}%; exit {result.exit_code})",
-          file=out)
+    print(f"  {verdict} (min {result.min_psnr_db:g} dB, coverage {result.min_coverage * 100:g}%, "
+          f"stray at most {result.max_stray * 100:g}%; exit {result.exit_code})", file=out)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -87,12 +107,21 @@ def run(args: argparse.Namespace) -> int:
     from saucerfab.cli.schema_flag import schema_asked
     from saucerfab.errors import ConfigError
     from saucerfab.fileio import atomic_dir
+    from saucerfab.eyes import DEFAULT_IPD_MM
     from saucerfab.verify import parse_eyes, verify_print
     from saucerfab.verify.schema import JSON_SCHEMA
 
     if schema_asked(args, JSON_SCHEMA, args.folder, "give the print folder to verify: saucerfab verify PRINT_DIR"):
         return 0
-    eyes = parse_eyes(args.eyes, args.ipd_mm)
+    from saucerfab.extras import require
+
+    require("verify")  # after --schema, which prints without Mitsuba
+    # not given: the eyes the design was made for, else both (verify_print reads them from export.json)
+    if args.ipd_mm is not None and (args.eyes or "").strip().lower() != "both":
+        raise ConfigError(f"--ipd-mm {args.ipd_mm:g} sets the distance between a viewer's two eyes; give it with "
+                          "--eyes both, or drop it")
+    ipd = DEFAULT_IPD_MM if args.ipd_mm is None else args.ipd_mm
+    eyes = parse_eyes(args.eyes, ipd) if args.eyes is not None else None
     folder = Path(args.folder)
     out = Path(args.out) if args.out else folder / "verify"
 
@@ -111,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
     with atomic_dir(out) as tmp:
         result = verify_print(
             folder, eyes=eyes, res=args.res, spp=args.spp, min_psnr_db=args.min_psnr,
-            min_coverage=args.min_coverage, pictures_dir=tmp, all_formats=not args.primary_only, progress=progress,
+            min_coverage=args.min_coverage, max_stray=args.max_stray, pictures_dir=tmp, all_formats=not args.primary_only, progress=progress,
         )
         doc = result.to_dict()
         (tmp / "verify.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")

@@ -23,10 +23,15 @@ each eye (:mod:`.eyes`):
    itself after the best whole-picture shift (:func:`~.metrics.best_shift`,
    up to ``MAX_SHIFT_FRACTION`` of the frame), which no print can pass
    (a perfectly flat print scores 12-25 dB there);
-4. coverage is the share of the frame the saucer fills in that view.
+4. coverage is the share of the frame the saucer fills in that view;
+5. from each eye, the primary file's **whole view** (:mod:`.wholeview`):
+   everything of the piece the eye sees, against the ideal whole view (each
+   picture in its frame, its background around it), with the stray share of
+   each surround and the reflected picture's share of the cup's width.
 
 A view passes when its PSNR is at least ``min_psnr_db`` and its coverage at
-least ``min_coverage``; the folder passes when every view of every eye does.
+least ``min_coverage``; a whole view when both its stray shares are at most
+``max_stray``; the folder passes when every view and whole view of every eye does.
 """
 
 from __future__ import annotations
@@ -41,7 +46,7 @@ import numpy as np
 
 from saucerfab.errors import ConfigError
 from saucerfab.eyes import EyeSpec, eye_positions, eyes_made_for
-from saucerfab.verify.metrics import best_shift, psnr, shifted, ssim
+from saucerfab.verify.metrics import best_shift, psnr, ssim
 from saucerfab.verify.printfolder import (
     PrintScene,
     VerifyInputError,
@@ -53,7 +58,15 @@ from saucerfab.verify.printfolder import (
     read_surface,
 )
 from saucerfab.verify.raytrace import FULL_COVERAGE
-from saucerfab.verify.results import REFERENCE_FLAT_PRINT, REFERENCE_PICTURE, FileScore, VerifyResult, ViewScore
+from saucerfab.verify.results import (
+    REFERENCE_FLAT_PRINT,
+    REFERENCE_PICTURE,
+    FileScore,
+    VerifyResult,
+    ViewScore,
+    WholeViewScore,
+)
+from saucerfab.verify.wholeview import DEFAULT_MAX_STRAY
 
 #: default pass level per view, dB: a picture at 20 dB is plainly recognisable
 #: with visible flaws; graphic designs print at 30 dB and more from the design eye
@@ -121,7 +134,7 @@ def resize_box(img: np.ndarray, size: int) -> np.ndarray:
     return np.clip(np.stack(planes, -1), 0.0, 1.0).astype(np.float32)
 
 
-def _check_levels(res: int, spp: int, min_psnr_db: float, min_coverage: float) -> None:
+def _check_levels(res: int, spp: int, min_psnr_db: float, min_coverage: float, max_stray: float = DEFAULT_MAX_STRAY) -> None:
     if isinstance(res, bool) or not isinstance(res, int) or not 16 <= res <= MAX_RES:
         raise ConfigError(f"--res must be an integer in [16, {MAX_RES}] pixels, got {res!r}")
     if isinstance(spp, bool) or not isinstance(spp, int) or not 1 <= spp <= MAX_SPP:
@@ -130,6 +143,8 @@ def _check_levels(res: int, spp: int, min_psnr_db: float, min_coverage: float) -
         raise ConfigError(f"--min-psnr must be a number of dB, got {min_psnr_db!r}")
     if not (isinstance(min_coverage, (int, float)) and 0 <= min_coverage <= 1):
         raise ConfigError(f"--min-coverage must be a share in [0, 1], got {min_coverage!r}")
+    if isinstance(max_stray, bool) or not (isinstance(max_stray, (int, float)) and 0 <= max_stray <= 1):
+        raise ConfigError(f"--max-stray must be a share in [0, 1] (the issue's target is 0.05), got {max_stray!r}")
 
 
 def verify_print(
@@ -140,6 +155,7 @@ def verify_print(
     spp: int = DEFAULT_SPP,
     min_psnr_db: float = DEFAULT_MIN_PSNR_DB,
     min_coverage: float = DEFAULT_MIN_COVERAGE,
+    max_stray: float = DEFAULT_MAX_STRAY,
     pictures_dir: str | Path | None = None,
     all_formats: bool = True,
     progress: Progress | None = None,
@@ -153,6 +169,7 @@ def verify_print(
         res: render size, pixels per side.
         spp: samples per pixel (the colour pass: two halves, :func:`~.raytrace.colour_halves`).
         min_psnr_db, min_coverage: pass levels per view.
+        max_stray: highest stray share of either surround a whole view passes with (:mod:`.wholeview`).
         pictures_dir: where to write the side-by-side pictures (created;
             each written atomically); None writes none.
         all_formats: also render the other textured files from the design eye.
@@ -167,9 +184,10 @@ def verify_print(
     """
     from saucerfab.verify.flatprint import FlatPrints
     from saucerfab.verify.raytrace import INTEGRATOR, PrintTracer, mitsuba, sampling_variance
+    from saucerfab.verify.wholeview import WholeViews, background_colours
 
     t_start = time.perf_counter()
-    _check_levels(res, spp, min_psnr_db, min_coverage)
+    _check_levels(res, spp, min_psnr_db, min_coverage, max_stray)
     folder = Path(folder)
     if not folder.is_dir():
         raise VerifyInputError(f"{folder} is not a folder; give the folder 'saucerfab export --out' wrote")
@@ -190,7 +208,7 @@ def verify_print(
     # the eyes the design was made for (an eye box is verified over that box), else the design eye and a viewer's two
     spec = eyes or eyes_made_for(design_parameters(folder)) or EyeSpec()
     all_eyes = eye_positions(spec, scene.camera, scene.views["direct"].target)
-    jobs = len(all_eyes) * len(views) + (len(files) - 1) * len(views)
+    jobs = len(all_eyes) * (len(views) + 1) + (len(files) - 1) * len(views)
     done = 0
 
     def step(msg: str) -> None:
@@ -204,6 +222,7 @@ def verify_print(
     if pictures is not None:
         pictures.mkdir(parents=True, exist_ok=True)
     scores: list[FileScore] = []
+    wholes: list[WholeViewScore] = []
     renders: dict[tuple[str, str], np.ndarray] = {}
     max_shift = round(MAX_SHIFT_FRACTION * res)
     limits = folder_limits(folder)  # the export's own sizes, within what saucerfab exports
@@ -212,6 +231,9 @@ def verify_print(
         tracer = PrintTracer(surface, scene.cup)
         fs = FileScore(path, fmt)
         flats: FlatPrints | None = None
+        if k == 0:
+            whole = WholeViews(tracer, surface, scene, full_refs,
+                               background_colours(full_refs, design_parameters(folder).get("background")), res)
         design_regions: dict[str, np.ndarray] = {}
         for eye in all_eyes if k == 0 else all_eyes[:1]:
             for view in views:
@@ -251,8 +273,11 @@ def verify_print(
                     renders[(eye.name, view + ":reference")] = ref1
                 fs.views.append(score)
                 step(f"{path.name}: {view} view from the {eye.name} eye {score.psnr_db:.1f} dB")
+            if k == 0:
+                wholes.append(_whole_view(whole, eye.name, eye.position, spp, max_stray, pictures, renders))
+                step(f"{path.name}: the whole view from the {eye.name} eye {wholes[-1].psnr_db:.1f} dB")
         scores.append(fs)
-    passed = all(v.passed for f in scores for v in f.views)
+    passed = all(v.passed for f in scores for v in f.views) and all(w.passed for w in wholes)
     return VerifyResult(
         folder=folder,
         files=scores,
@@ -267,4 +292,23 @@ def verify_print(
         pictures_dir=pictures,
         renderer={"name": "mitsuba", "version": str(mi.__version__), "variant": str(mi.variant()), "integrator": str(INTEGRATOR["type"])},
         renders=renders,
+        whole_views=wholes,
+        max_stray=float(max_stray),
     )
+
+
+def _whole_view(whole: Any, eye_name: str, eye: tuple[float, float, float], spp: int, max_stray: float,
+                pictures: Path | None, renders: dict[tuple[str, str], np.ndarray]) -> WholeViewScore:
+    """Render and score one eye's whole view (:class:`~.wholeview.WholeViews`), write its picture, keep its arrays."""
+    wv = whole.render(eye, spp)
+    strays = [x for x in (wv.stray_direct, wv.stray_reflected) if math.isfinite(x)]
+    score = WholeViewScore(eye_name, wv.psnr_db, wv.stray_direct, wv.stray_reflected, wv.width_share, wv.pixels,
+                           wv.surround_pixels(), all(x <= max_stray for x in strays))
+    if pictures is not None:
+        from saucerfab.verify.pictures import write_whole_picture
+
+        score.picture = write_whole_picture(pictures, f"{eye_name}_whole", wv, score).name
+    renders[(eye_name, "whole")] = wv.rgb
+    renders[(eye_name, "whole:ideal")] = wv.ideal
+    renders[(eye_name, "whole:stray")] = wv.stray
+    return score

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from saucerfab.verify.results import REFERENCE_PICTURE, ViewScore
+from saucerfab.verify.results import REFERENCE_PICTURE, ViewScore, WholeViewScore
 
 #: absolute difference (mean over RGB, sRGB units) shown at the top of the heat map's scale
 HEAT_MAX = 0.5
@@ -46,3 +47,29 @@ def write_view_picture(folder: Path, stem: str, render: np.ndarray, ref: np.ndar
     from saucerfab.report import to_png_bytes
 
     return write_bytes_atomic(folder / f"{stem}.png", to_png_bytes(view_picture(render, ref, region, score)))
+
+
+def whole_picture(wv: Any, score: WholeViewScore) -> np.ndarray:
+    """The whole view, its ideal and the stray map (:mod:`.wholeview`) as one (H, W, 3) uint8 picture, titled."""
+    from saucerfab.report import side_by_side
+    from saucerfab.verify.wholeview import stray_map
+
+    def pct(x: float) -> str:
+        return "--" if x != x else f"{x * 100:.0f}%"
+
+    return side_by_side(
+        [
+            (f"whole view, {score.eye} eye, {score.psnr_db:.1f} dB", wv.rgb),
+            ("meant (grey: not scored)", wv.ideal),
+            (f"stray: saucer {pct(score.stray_direct)}, mirror {pct(score.stray_reflected)}", stray_map(wv)),
+        ],
+        height=max(256, wv.rgb.shape[0]),
+    )
+
+
+def write_whole_picture(folder: Path, stem: str, wv: Any, score: WholeViewScore) -> Path:
+    """Write :func:`whole_picture` as ``folder/stem.png`` (atomically); returns the path."""
+    from saucerfab.fileio import write_bytes_atomic
+    from saucerfab.report import to_png_bytes
+
+    return write_bytes_atomic(folder / f"{stem}.png", to_png_bytes(whole_picture(wv, score)))

@@ -1,4 +1,4 @@
-"""What ``saucerfab verify`` found: scores per view, per file, and the whole result (schema ``saucerfab.verify/2``).
+"""What ``saucerfab verify`` found: scores per view, per file, and the whole result (schema ``saucerfab.verify/3``).
 
 Plain data with their JSON form; :mod:`.core` makes them, :mod:`.pictures`
 titles its pictures with them and the CLI prints them.
@@ -16,12 +16,17 @@ import numpy as np
 from saucerfab import __version__
 from saucerfab.verify.eyes import Eye
 
-SCHEMA = "saucerfab.verify/2"
+SCHEMA = "saucerfab.verify/3"
 
 #: what a view was compared with: the design eye sees the reference picture itself
 REFERENCE_PICTURE = "picture"
 #: a moved eye sees the flat print: the picture lying flat on the saucer, seen from that eye (:mod:`.flatprint`)
 REFERENCE_FLAT_PRINT = "flat print"
+
+
+def _num(v: float, nd: int) -> float | None:
+    """A finite number rounded for JSON; None for NaN."""
+    return None if not math.isfinite(v) else round(float(v), nd)
 
 
 @dataclass
@@ -60,22 +65,59 @@ class ViewScore:
     psnr_shift_db: float = float("nan")
 
     def to_dict(self) -> dict[str, Any]:
-        def num(v: float, nd: int) -> float | None:
-            return None if not math.isfinite(v) else round(float(v), nd)
-
         return {
             "view": self.view,
             "eye": self.eye,
-            "psnr_db": num(self.psnr_db, 2),
-            "psnr_unshifted_db": num(self.psnr_unshifted_db, 2),
-            "ssim": num(self.ssim, 4),
+            "psnr_db": _num(self.psnr_db, 2),
+            "psnr_unshifted_db": _num(self.psnr_unshifted_db, 2),
+            "ssim": _num(self.ssim, 4),
             "coverage": round(float(self.coverage), 4),
             "pixels": int(self.pixels),
             "shift_px": [int(self.shift_px[0]), int(self.shift_px[1])],
             "passed": bool(self.passed),
             "picture": self.picture,
             "reference": self.reference,
-            "psnr_shift_db": num(self.psnr_shift_db, 2),
+            "psnr_shift_db": _num(self.psnr_shift_db, 2),
+        }
+
+
+@dataclass
+class WholeViewScore:
+    """The whole view from one eye (:mod:`.wholeview`): everything of the piece that eye sees.
+
+    Attributes:
+        eye: the eye's name.
+        psnr_db: PSNR against the ideal whole view over the pixels that see the saucer's top, dB.
+        stray_direct: share of the saucer seen directly outside the direct frame that is far from
+            the direct picture's background (NaN when none is seen there).
+        stray_reflected: the same for the mirror's image of the saucer outside the reflected frame.
+        width_share: the reflected picture's width over the cup's visible width (same image row).
+        pixels: pixels scored; surround_pixels: (direct, mirror) surround pixels.
+        passed: both stray shares at most the level asked for.
+        picture: the whole-view picture's file name, if written.
+    """
+
+    eye: str
+    psnr_db: float
+    stray_direct: float
+    stray_reflected: float
+    width_share: float
+    pixels: int
+    surround_pixels: tuple[int, int]
+    passed: bool
+    picture: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "eye": self.eye,
+            "psnr_db": _num(self.psnr_db, 2),
+            "stray_direct": _num(self.stray_direct, 4),
+            "stray_reflected": _num(self.stray_reflected, 4),
+            "width_share": _num(self.width_share, 4),
+            "pixels": int(self.pixels),
+            "surround_pixels": [int(self.surround_pixels[0]), int(self.surround_pixels[1])],
+            "passed": bool(self.passed),
+            "picture": self.picture,
         }
 
 
@@ -109,6 +151,8 @@ class VerifyResult:
         renderer: name, version and variant of the renderer.
         renders: the primary file's renders for reports and tests: (eye, view) -> (S, S, 3)
             rgb, and (eye, view + ":region") -> (S, S) bool, the pixels compared.
+        whole_views: the primary file's whole view from each eye (:mod:`.wholeview`).
+        max_stray: the highest stray share a whole view passes with.
     """
 
     folder: Path
@@ -124,6 +168,8 @@ class VerifyResult:
     pictures_dir: Path | None
     renderer: dict[str, str]
     renders: dict[tuple[str, str], np.ndarray] = field(default_factory=dict, repr=False)
+    whole_views: list[WholeViewScore] = field(default_factory=list)
+    max_stray: float = float("nan")
 
     @property
     def exit_code(self) -> int:
@@ -137,7 +183,7 @@ class VerifyResult:
         return None
 
     def to_dict(self, *, record_times: bool = True) -> dict[str, Any]:
-        """JSON-ready, schema ``saucerfab.verify/2``; without times when ``record_times`` is False."""
+        """JSON-ready, schema ``saucerfab.verify/3``; without times when ``record_times`` is False."""
         d = {
             "schema": SCHEMA,
             "saucerfab_version": __version__,
@@ -155,6 +201,8 @@ class VerifyResult:
             ],
             "where_to_stand": self.where_to_stand,
             "files": [f.to_dict() for f in self.files],
+            "max_stray": _num(self.max_stray, 4),
+            "whole_views": [w.to_dict() for w in self.whole_views],
         }
         if record_times:
             d["seconds"] = round(self.seconds, 2)

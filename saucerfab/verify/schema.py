@@ -1,4 +1,4 @@
-"""JSON Schema of ``saucerfab verify --json`` (``saucerfab.verify/2``); ``saucerfab verify --schema`` prints it."""
+"""JSON Schema of ``saucerfab verify --json`` (``saucerfab.verify/3``); ``saucerfab verify --schema`` prints it."""
 
 from __future__ import annotations
 
@@ -31,14 +31,38 @@ VIEW_SCORE: dict[str, Any] = {
     },
 }
 
+_SHARE_OR_NULL = {"type": ["number", "null"], "minimum": 0}
+
+WHOLE_VIEW_SCORE: dict[str, Any] = {
+    "type": "object",
+    "required": ["eye", "psnr_db", "stray_direct", "stray_reflected", "width_share", "pixels", "surround_pixels",
+                 "passed", "picture"],
+    "properties": {
+        "eye": {"type": "string"},
+        "psnr_db": {**_NUM_OR_NULL, "description": "PSNR of everything the eye sees of the saucer against the ideal "
+                                                   "whole view (each picture in its frame, its background elsewhere)"},
+        "stray_direct": {**_SHARE_OR_NULL, "maximum": 1,
+                         "description": "share of the saucer seen directly outside the direct frame whose colour is "
+                                        "farther than 0.25 (sRGB, Euclidean) from the direct picture's background"},
+        "stray_reflected": {**_SHARE_OR_NULL, "maximum": 1,
+                            "description": "the same for the mirror's image of the saucer outside the reflected frame"},
+        "width_share": {**_SHARE_OR_NULL, "description": "the reflected picture's width over the cup's visible width"},
+        "pixels": {"type": "integer", "minimum": 0, "description": "pixels that see the saucer's top (scored)"},
+        "surround_pixels": {"type": "array", "items": {"type": "integer", "minimum": 0}, "minItems": 2, "maxItems": 2,
+                            "description": "pixels of the direct surround and of the mirror's surround"},
+        "passed": {"type": "boolean", "description": "both stray shares at most max_stray"},
+        "picture": {"type": ["string", "null"], "description": "whole view, ideal and stray map, relative to the pictures folder"},
+    },
+}
+
 JSON_SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "title": "saucerfab verify report",
     "type": "object",
     "required": ["schema", "saucerfab_version", "folder", "renderer", "res", "spp", "min_psnr_db", "min_coverage",
-                 "passed", "exit_code", "eyes", "where_to_stand", "files"],
+                 "passed", "exit_code", "eyes", "where_to_stand", "files", "max_stray", "whole_views"],
     "properties": {
-        "schema": {"const": "saucerfab.verify/2"},
+        "schema": {"const": "saucerfab.verify/3"},
         "saucerfab_version": {"type": "string"},
         "folder": {"type": "string"},
         "renderer": {"type": "object", "required": ["name", "version", "variant", "integrator"]},
@@ -46,7 +70,10 @@ JSON_SCHEMA: dict[str, Any] = {
         "spp": {"type": "integer", "description": "samples per pixel"},
         "min_psnr_db": {"type": "number"},
         "min_coverage": {"type": "number"},
-        "passed": {"type": "boolean", "description": "every view of every file from every eye passed"},
+        "passed": {"type": "boolean", "description": "every view of every file from every eye passed, and every whole view"},
+        "max_stray": {**_NUM_OR_NULL, "description": "the highest stray share a whole view passes with"},
+        "whole_views": {"type": "array", "items": WHOLE_VIEW_SCORE,
+                        "description": "the primary file's whole view from each eye (/3)"},
         "exit_code": {"enum": [0, 1]},
         "eyes": {
             "type": "array",

@@ -257,3 +257,124 @@ def test_a_huge_picture_gets_only_saucerfabs_message(tmp_path: Path, capsys: pyt
     assert code == 2
     assert "12000x12000" in err and "Downscale it first" in err, err
     assert not [w for w in seen if "DecompressionBomb" in type(w.message).__name__ or "decompression" in str(w.message)]
+
+
+# --------------------------------------------------------------------------- the rules at every door
+
+
+def test_a_batch_manifest_refuses_a_format_its_printer_does_not_take_at_load(tmp_path: Path) -> None:
+    from saucerfab.batch import load_manifest
+    from saucerfab.errors import ConfigError
+
+    _design_folder(tmp_path, "bureau")
+    manifest = tmp_path / "m.toml"
+    manifest.write_text('[[job]]\nid = "a"\ndesign = "design"\nprinter = "bureau"\nformats = ["obj", "stl"]\n')
+    with pytest.raises(ConfigError, match=r"m\.toml:5: job 'a': printer 'bureau' does not take STL"):
+        load_manifest(manifest)
+
+
+def test_an_export_with_no_format_the_printer_takes_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = _design_folder(tmp_path, "mimaki_3duj553")  # its profile lists no GLB
+    out = tmp_path / "p"
+    assert main(["export", str(folder), "-o", str(out), "--formats", "glb", "--allow-format", *QUICK]) == 2
+    assert "the print set would be empty" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_the_trial_verify_exports_a_format_the_printer_takes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import saucerfab.fabricate.pipeline as fab
+    from saucerfab.errors import ExportError
+    from saucerfab.finish import verify_design
+
+    asked: list[object] = []
+
+    def stop(*args: object, formats: object = None, **kwargs: object) -> None:
+        asked.append(formats)
+        raise ExportError("stopped by the test")
+
+    monkeypatch.setattr(fab, "export_design", stop)
+    profiles = tmp_path / "profiles"
+    profiles.mkdir()
+    text = (Path(__file__).resolve().parents[2] / "printers" / "j55.toml").read_text()
+    # a profile's key is its file's stem
+    (profiles / "no_obj.toml").write_text(text.replace('accepted_formats = ["3mf", "obj", "wrl", "ply", "stl", "glb"]',
+                                                       'accepted_formats = ["3mf", "wrl"]'))
+    monkeypatch.setenv("SAUCERFAB_PRINTERS", str(profiles))
+    for printer, fmt in (("j55", "obj"), ("no_obj", "3mf")):
+        with pytest.raises(ExportError, match="stopped by the test"):
+            verify_design(tmp_path, printer=printer)
+        assert asked.pop() == [fmt]
+
+
+def test_check_globs_that_match_folders_check_their_meshes_and_skip_a_zip_of_pictures(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import zipfile
+
+    folder = _design_folder(tmp_path, "j55")
+    for name in ("a", "b"):
+        assert main(["export", str(folder), "-o", str(tmp_path / "prints" / name), "--no-check", *QUICK]) == 0
+    with zipfile.ZipFile(tmp_path / "prints" / "a" / "pictures.zip", "w") as zf:
+        zf.writestr("one.png", b"not a mesh")
+    capsys.readouterr()
+    assert main(["check", str(tmp_path / "prints" / "*"), "--json"]) == 0
+    names = [Path(f["path"]).relative_to(tmp_path / "prints").as_posix()
+             for f in json.loads(capsys.readouterr().out)["files"]]
+    assert names == ["a/saucer.3mf", "b/saucer.3mf"]
+
+
+def test_export_looks_a_recorded_printer_up_among_the_profiles_never_as_a_path(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    d = synthetic_design(resolution=16, texture_size=32, seed=2)
+    d = replace(d, parameters={**d.parameters, "printer": "../elsewhere/mine.toml",
+                               "print_target": {"printer": "mine"}})
+    folder = save_design(d, tmp_path / "design")
+    assert main(["export", str(folder), "-o", str(tmp_path / "p"), "--no-check", *QUICK]) == 2
+    err = capsys.readouterr().err
+    assert "made for printer 'mine', which is not among this installation's profiles" in err, err
+
+
+def test_a_design_json_whose_parameters_are_not_an_object_is_a_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = _design_folder(tmp_path, "j55")
+    meta = json.loads((folder / "design.json").read_text())
+    meta["parameters"] = None
+    (folder / "design.json").write_text(json.dumps(meta))
+    assert main(["export", str(folder), "-o", str(tmp_path / "p"), "--no-check", *QUICK]) == 2
+    err = capsys.readouterr().err
+    assert "'parameters' must be a JSON object" in err and "Traceback" not in err, err
+
+
+def test_verify_renders_from_the_eyes_the_design_was_made_for(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import saucerfab.verify.core as core
+    from saucerfab.eyes import eyes_made_for, parse_eyes
+    from saucerfab.verify.printfolder import design_parameters
+
+    assert eyes_made_for({"eyes": "box:40,20,2"}) == parse_eyes("box:40,20,2")
+    assert eyes_made_for({"eyes": "both", "ipd_mm": 60.0}) == parse_eyes("both", 60.0)
+    assert eyes_made_for({}) is None and eyes_made_for(None) is None and eyes_made_for({"eyes": "sideways"}) is None
+    d = synthetic_design(resolution=16, texture_size=32, seed=2)
+    d = replace(d, parameters={**d.parameters, "eyes": "box:40,20,2"},
+                references={v: d.texture for v in ("direct", "reflected")})
+    folder = save_design(d, tmp_path / "design")
+    assert main(["export", str(folder), "-o", str(tmp_path / "p"), "--formats", "obj", "--no-check", *QUICK]) == 0
+    assert design_parameters(tmp_path / "p")["eyes"] == "box:40,20,2"
+    seen = []
+
+    def stop(spec, *args, **kwargs):  # type: ignore[no-untyped-def]
+        seen.append(spec)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(core, "eye_positions", stop)
+    for eyes, expected in ((None, parse_eyes("box:40,20,2")), (parse_eyes("design"), parse_eyes("design"))):
+        with pytest.raises(KeyboardInterrupt):
+            core.verify_print(tmp_path / "p", eyes=eyes)
+        assert seen.pop() == expected
+
+
+def test_verify_refuses_ipd_without_both(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "print").mkdir()
+    assert main(["verify", str(tmp_path / "print"), "--ipd-mm", "60"]) == 2
+    assert "give it with --eyes both" in capsys.readouterr().err

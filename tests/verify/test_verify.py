@@ -191,7 +191,7 @@ def test_cli_writes_pictures_json_and_report_and_gates_on_levels(flat_print, tmp
 
 def test_schema_prints(capsys):
     assert main(["verify", "--schema"]) == 0
-    assert json.loads(capsys.readouterr().out)["properties"]["schema"]["const"] == "saucerfab.verify/2"
+    assert json.loads(capsys.readouterr().out)["properties"]["schema"]["const"] == "saucerfab.verify/3"
 
 
 def _broken(folder: Path, tmp_path: Path, name: str, how) -> Path:
