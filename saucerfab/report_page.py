@@ -294,7 +294,27 @@ def verify_section(folder: Path, *, note: str = "") -> Section | None:
                 if data:
                     images.append((f"{Path(str(f.get('path', ''))).name}: {v.get('view')} view, {v.get('eye')} eye",
                                    data))
+    whole_rows = []
+    for w in ver.get("whole_views") or []:
+        if not isinstance(w, Mapping):
+            continue
+        whole_rows.append([w.get("eye"), _db(w.get("psnr_db")), _pct(w.get("stray_direct")),
+                           _pct(w.get("stray_reflected")), _pct(w.get("width_share")),
+                           "pass" if w.get("passed") else "STRAY"])
+        name = w.get("picture")
+        if isinstance(name, str) and "/" not in name and "\\" not in name:
+            data = _read(folder / "verify" / name, _MAX_PICTURE_BYTES)
+            if data:
+                images.append((f"the whole view from the {w.get('eye')} eye: render | ideal | stray (red on the "
+                               "saucer, cyan in the mirror)", data))
     r = ver.get("renderer", {})
+    whole = ""
+    if whole_rows:
+        table = "; ".join(f"{row[0]} eye {row[1]} dB, stray {row[2]} on the saucer and {row[3]} in the mirror, "
+                          f"the reflected picture {row[4]} of the cup's width" for row in whole_rows)
+        whole = (" The whole view (everything of the piece the eye sees, against each picture in its frame and "
+                 "its background elsewhere; stray: the share of a frame's surround far from the background, "
+                 f"passing at most {_pct(ver.get('max_stray'))}): {table}.")
     return Section(
         "Verified: what the print shows",
         note
@@ -307,7 +327,7 @@ def verify_section(folder: Path, *, note: str = "") -> Section | None:
         "what the print adds (the relief's parallax) is; the last column is the older score against the input "
         "itself after the best whole-picture shift, which even a flat print fails. Pass level "
         f"{ver.get('min_psnr_db')} dB and {100 * float(ver.get('min_coverage', 0)):.0f} % coverage per view: "
-        + ("every view passes." if ver.get("passed") else "some views are under it."),
+        + ("every view passes." if ver.get("passed") else "some views are under it.") + whole,
         images=images,
         grid=(["file", "view", "eye", "compared with", "PSNR dB", "SSIM", "coverage", "vs input, shifted dB (px)", ""],
               rows),
@@ -316,6 +336,11 @@ def verify_section(folder: Path, *, note: str = "") -> Section | None:
 
 def _db(v: object) -> str:
     return "-" if not isinstance(v, (int, float)) else f"{v:.1f}"
+
+
+def _pct(v: object) -> str:
+    """A share (0..1) as a whole percentage, ``-`` when not a number."""
+    return "-" if not isinstance(v, (int, float)) or v != v else f"{100 * v:.0f} %"
 
 
 # --------------------------------------------------------------------------- print folder

@@ -72,6 +72,20 @@ def test_export_writes_checks_verify_and_report(folders, capsys):
         assert words in html, words
 
 
+def test_print_report_shows_the_whole_view_from_each_eye(folders):
+    _, print_dir = folders
+    ver = json.loads((print_dir / "verify" / "verify.json").read_text())
+    wholes = ver["whole_views"]
+    assert [w["eye"] for w in wholes] == ["design", "left", "right"]
+    html = (print_dir / "report.html").read_text(encoding="utf-8")
+    assert "The whole view (everything of the piece the eye sees" in html
+    for w in wholes:  # each eye's figures as the report rounds them, and its picture
+        assert (f"{w['eye']} eye {w['psnr_db']:.1f} dB, stray {100 * w['stray_direct']:.0f} % on the saucer and "
+                f"{100 * w['stray_reflected']:.0f} % in the mirror") in html, w
+        assert f"the whole view from the {w['eye']} eye: render | ideal | stray" in html
+        assert (print_dir / "verify" / w["picture"]).is_file()
+
+
 def test_design_report_says_the_method_and_stages_in_the_clis_words(folders):
     design, _ = folders
     html = (design / "report.html").read_text(encoding="utf-8")

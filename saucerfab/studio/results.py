@@ -60,6 +60,16 @@ def verify_rows(run_id: str, folder: Path, rel: str) -> list[dict[str, Any]]:
                          "psnr_db": v.get("psnr_db"),
                          "coverage": v.get("coverage"), "passed": v.get("passed"),
                          "picture_url": file_url(run_id, f"{rel}/verify/{pic}") if ok else None})
+    # the whole view from each eye (verify/3): everything of the piece the eye sees, against the ideal
+    for w in (ver or {}).get("whole_views", []):
+        if not isinstance(w, dict):
+            continue
+        pic = w.get("picture")
+        ok = isinstance(pic, str) and "/" not in pic and "\\" not in pic and (folder / "verify" / pic).is_file()
+        rows.append({"view": "whole", "eye": w.get("eye"), "reference": "whole view", "psnr_db": w.get("psnr_db"),
+                     "stray": [w.get("stray_direct"), w.get("stray_reflected")], "width_share": w.get("width_share"),
+                     "passed": w.get("passed"),
+                     "picture_url": file_url(run_id, f"{rel}/verify/{pic}") if ok else None})
     return rows
 
 

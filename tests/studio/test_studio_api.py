@@ -280,6 +280,9 @@ def test_design_verify_export_download(app) -> None:  # type: ignore[no-untyped-
         for url in [*res["images"].values(), res["report_url"]]:
             assert client.get(url).status_code == 200, url
         assert res["verify"] and {"view", "eye", "psnr_db", "coverage", "passed"} <= set(res["verify"][0])
+        whole = [r for r in res["verify"] if r["view"] == "whole"]  # the whole view from each eye (verify/3)
+        assert [r["eye"] for r in whole] == ["design", "left", "right"] and len(whole[0]["stray"]) == 2
+        assert client.get(whole[0]["picture_url"]).status_code == 200
         assert client.get(res["verify"][0]["picture_url"]).status_code == 200
         page = client.get(res["viewer_url"])
         assert page.status_code == 200 and "importmap" in page.text and "saucer-viewer" in page.text

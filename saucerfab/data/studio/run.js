@@ -396,10 +396,13 @@ function verifyTable(box, rows, { collapse = false } = {}) {
     tr.append(
       el("td", "", human(row.view)),
       el("td", "", human(row.eye)),
-      el("td", "", row.reference === "flat print" ? "a flat print, from this eye" : "the picture"),
+      el("td", "", row.reference === "flat print" ? "a flat print, from this eye"
+        : row.reference === "whole view" ? "each picture in its frame, its background around it" : "the picture"),
       el("td", "num", row.psnr_db != null ? Number(row.psnr_db).toFixed(1) : ""),
-      el("td", "num", row.coverage != null ? `${Math.round(100 * row.coverage)} %` : ""),
-      el("td", row.passed ? "ok" : "bad", row.passed ? "passed" : "low"),
+      // a whole view's stray shares (saucer, mirror) where a frame's coverage would stand
+      el("td", "num", row.stray ? `stray ${row.stray.map((x) => (x != null ? `${Math.round(100 * x)} %` : "-")).join(" / ")}`
+        : row.coverage != null ? `${Math.round(100 * row.coverage)} %` : ""),
+      el("td", row.passed ? "ok" : "bad", row.passed ? "passed" : row.stray ? "stray" : "low"),
     );
     table.append(tr);
     for (const [k, v] of Object.entries(row)) {
