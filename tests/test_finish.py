@@ -1,4 +1,4 @@
-"""Tests of saucerfab.finish: which files an export's check reads, its limits, and ``check.json``.
+"""Tests of saucerfab.workflow's finish step: which files an export's check reads, its limits, and ``check.json``.
 
 ``tests/fabricate/test_export_check_limits.py`` holds the raised limits
 against a lowered default on a real export; here :func:`meshes_to_check`
@@ -26,7 +26,7 @@ from saucerfab.errors import ExportError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.pipeline import ExportResult, export_design
 from saucerfab.fabricate.registry import OTHER_FORMATS_DIR
-from saucerfab.finish import Finished, export_limits, finish_print, meshes_to_check
+from saucerfab.workflow import CheckedFile, PrintResult, export_limits, finish_print, meshes_to_check
 
 OBJ_ZIP = {"saucer.obj": b"mtllib saucer.mtl\nv 0 0 0\n", "saucer.mtl": b"newmtl m\n", "saucer.png": b"\x89PNG"}
 
@@ -108,9 +108,10 @@ def test_export_limits_rise_to_a_large_export(tmp_path: Path) -> None:
 
 
 def test_finished_exit_code_is_the_worst_check() -> None:
-    assert Finished().check_exit_code == 0
-    done = Finished(checks=[(Path("a"), SimpleNamespace(exit_code=1)), (Path("b"), None),
-                            (Path("c"), SimpleNamespace(exit_code=2))])
+    assert PrintResult().check_exit_code == 0
+    done = PrintResult(checks=[CheckedFile(Path("a"), "a", SimpleNamespace(exit_code=1)),
+                               CheckedFile(Path("b"), "b", None),
+                               CheckedFile(Path("c"), "c", SimpleNamespace(exit_code=2))])
     assert done.check_exit_code == 2
 
 
@@ -129,8 +130,9 @@ def test_finish_print_writes_check_json_without_times_and_with_relative_paths(ex
     assert export.files == {"obj": [folder / "saucer.zip"], "stl": [folder / OTHER_FORMATS_DIR / "saucer.stl"]}
     done = finish_print(export, export.profile, check=True, verify=False)
     assert done.verify is None and done.notes == []
-    assert [p for p, _ in done.checks] == [folder / "saucer.zip", folder / OTHER_FORMATS_DIR / "saucer.stl"]
-    assert done.check_exit_code == 0, [(p.name, r.reason()) for p, r in done.checks]
+    assert [c.written for c in done.checks] == [folder / "saucer.zip", folder / OTHER_FORMATS_DIR / "saucer.stl"]
+    assert [c.name for c in done.checks] == ["saucer.zip/saucer.obj", "saucer.stl"]  # a zip's mesh by its entry
+    assert done.check_exit_code == 0, [(c.name, c.report.reason()) for c in done.checks]
     text = (folder / "check.json").read_text(encoding="utf-8")
     doc = json.loads(text)
     assert doc["schema"] == "saucerfab.check/1"

@@ -118,3 +118,42 @@ def test_no_module_too_long() -> None:
         if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
     }
     assert not long, f"modules over {MAX_MODULE_LINES} lines (split along what they do): {long}"
+
+
+#: the rooms above the stages, top first (issue 41): the front doors (the commands, the batch, the studio,
+#: the demo), then the workflow that owns design -> export -> check -> verify -> report once; every other
+#: module is a stage or a helper below them (fabricate, check, verify, report_page, optimize, ...)
+ROOMS = (
+    ("saucerfab.cli", "saucerfab.batch", "saucerfab.studio", "saucerfab.demo", "saucerfab.__main__"),
+    ("saucerfab.workflow",),
+)
+
+
+def floor(module: str) -> int:
+    """How high ``module``'s room is: 0 for a stage or helper, one more for each room of :data:`ROOMS` below the top."""
+    for i, room in enumerate(ROOMS):
+        if any(module == r or module.startswith(r + ".") for r in room):
+            return len(ROOMS) - i
+    return 0
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[str]:
+    """``importer -> imported`` for each import of a module in a higher room (the package itself, the public
+    API's face, is in none)."""
+    return sorted(f"{a} -> {b}" for a, targets in graph.items() if a != "saucerfab"
+                  for b in targets if b != "saucerfab" and floor(b) > floor(a))
+
+
+def test_the_upward_finder_finds_a_stage_importing_the_workflow() -> None:
+    graph = {"saucerfab.verify.x": {"saucerfab.workflow.printing"}, "saucerfab.workflow": {"saucerfab.cli.export"},
+             "saucerfab.cli.export": {"saucerfab.workflow", "saucerfab.fabricate"},
+             "saucerfab.workflow.checks": {"saucerfab.check"}}
+    assert upward_imports(graph) == ["saucerfab.verify.x -> saucerfab.workflow.printing",
+                                     "saucerfab.workflow -> saucerfab.cli.export"]
+
+
+def test_no_upward_imports_between_the_rooms() -> None:
+    """The stages never import the workflow, the workflow never imports a front door."""
+    found = upward_imports(import_graph())
+    assert not found, ("imports of a higher room (move what both need down into the lower room, or let the "
+                       "front door pass it in): " + "; ".join(found))

@@ -373,9 +373,8 @@ def _collect(folder: Path, prefix: str) -> dict[str, bytes]:
 
 
 def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: list[str]) -> JobResult:
-    from saucerfab.check import check_mesh
-    from saucerfab.fabricate.pipeline import export_design
-    from saucerfab.finish import export_limits, meshes_to_check
+    from saucerfab.fabricate.options import FabOptions
+    from saucerfab.workflow import make_print
 
     inp, out = work / "in", work / "out"
     for rel, data in payload.files.items():
@@ -414,61 +413,51 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
     else:
         design_dir = inp / "design"
 
-    stage[0] = "export"
-    _emit(payload, "export")
-    t = time.perf_counter()
-    from saucerfab.fabricate.options import FabOptions
+    export_dir = out / "export"
+    started = [time.perf_counter()]
+
+    def on_stage(name: str) -> None:
+        # the report is timed with the verify (the batch report's columns: export, check, verify)
+        if name == "report":
+            return
+        now = time.perf_counter()
+        if stage[0] in ("export", "check", "verify"):
+            times[stage[0]] = now - started[0]
+        started[0] = now
+        stage[0] = name
+        _emit(payload, name)
 
     def export_progress(step: str, fraction: float) -> None:
         _emit(payload, f"export {step} {fraction:.0%}")
 
-    result = export_design(
-        design_dir,
-        out / "export",
-        printer=payload.printer,
-        cup_diameter_mm=payload.cup_diameter_mm,
-        formats=list(payload.formats),
-        options=FabOptions(**payload.export_options),
-        progress=export_progress,
-    )
-    times["export"] = time.perf_counter() - t
-    export_dir = out / "export"
-
-    stage[0] = "check"
-    _emit(payload, "check")
-    t = time.perf_counter()
+    # the quick ray-traced verify and the print's report.html without times, and each file's check in the
+    # job's check/ folder rather than a check.json in the print: byte-identical reruns
+    done = make_print(design_dir, export_dir, printer=payload.printer, cup_diameter_mm=payload.cup_diameter_mm,
+                      formats=list(payload.formats), options=FabOptions(**payload.export_options),
+                      progress=export_progress, record_times=False, write_check_json=False, scratch=work,
+                      on_stage=on_stage)
+    times[stage[0]] = time.perf_counter() - started[0]
     checks: dict[str, Any] = {}
     reasons: list[str] = []
-    written = {fmt: [Path(p) for p in result.files.get(fmt, [])] for fmt in payload.formats}
-    limits = export_limits(result)  # the job's own export: limits raised to its sizes, not a stranger's file's
-    with meshes_to_check(written, scratch=work) as meshes:
-        for mesh in meshes:
-            rel = f"export/{mesh.name}"  # a zipped OBJ's entry: export/<zip>/<obj>
-            report = check_mesh(mesh.path, printer=payload.printer, limits=limits)
-            d = report.to_dict()
-            d["path"] = rel  # the path inside the job's folder, not the worker's scratch
-            d.pop("elapsed_s", None)  # times go to the batch report; job files stay byte-identical
-            text = json.dumps(d, indent=2, sort_keys=True)
-            for prefix in {str(export_dir) + os.sep, str(export_dir.resolve()) + os.sep}:
-                text = text.replace(json.dumps(prefix)[1:-1], "export/")
-            files[f"check/{rel[len('export/'):]}.json"] = (text + "\n").encode()
-            checks[rel] = {
-                "verdict": report.verdict,
-                "exit_code": int(report.exit_code),
-                "findings": _finding_counts(report),
-            }
-            if report.exit_code != 0:
-                reasons.append(f"{rel}: {report.reason()}")
-    times["check"] = time.perf_counter() - t
-
-    stage[0] = "verify"
-    _emit(payload, "verify")
-    t = time.perf_counter()
-    from saucerfab.finish import finish_print
-
-    # the quick ray-traced verify and the print's report.html, without times (byte-identical reruns)
-    finish_print(result, payload.printer, check=False, verify=True, record_times=False)
-    times["verify"] = time.perf_counter() - t
+    for checked in done.checks:
+        rel = f"export/{checked.name}"  # a zipped OBJ's entry: export/<zip>/<obj>
+        report = checked.report
+        if report is None:
+            raise SaucerfabError(f"{rel} was not checked: saucerfab.check cannot be imported; reinstall saucerfab")
+        d = report.to_dict()
+        d["path"] = rel  # the path inside the job's folder, not the worker's scratch
+        d.pop("elapsed_s", None)  # times go to the batch report; job files stay byte-identical
+        text = json.dumps(d, indent=2, sort_keys=True)
+        for prefix in {str(export_dir) + os.sep, str(export_dir.resolve()) + os.sep}:
+            text = text.replace(json.dumps(prefix)[1:-1], "export/")
+        files[f"check/{rel[len('export/'):]}.json"] = (text + "\n").encode()
+        checks[rel] = {
+            "verdict": report.verdict,
+            "exit_code": int(report.exit_code),
+            "findings": _finding_counts(report),
+        }
+        if report.exit_code != 0:
+            reasons.append(f"{rel}: {report.reason()}")
     files.update(_collect(export_dir, "export"))
     verdict = max((c["verdict"] for c in checks.values()), key=lambda v: VERDICT_RANK.get(v, 3))
     return JobResult(

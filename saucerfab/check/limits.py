@@ -24,7 +24,7 @@ separately.
 
 saucerfab's own exports are not a stranger's files: ``saucerfab export``,
 ``batch``, ``verify`` and the print's report read them with these limits
-raised to what the export wrote (:func:`saucerfab.finish.export_limits`,
+raised to what the export wrote (:func:`saucerfab.workflow.export_limits`,
 :meth:`Limits.raised_to`), so a design at the largest grid is never refused
 by a hostile-file budget.
 
@@ -244,7 +244,7 @@ class Limits:
         """A copy whose size limits hold files of these sizes; never lower than this one's.
 
         For files whose sizes are known from a source one trusts (saucerfab's
-        own exports: :func:`saucerfab.finish.export_limits`): ``triangles``
+        own exports: :func:`saucerfab.workflow.export_limits`): ``triangles``
         raises the triangle, vertex and byte caps as :meth:`for_triangles`
         does; ``texture_px`` (a square texture's edge) the pixel caps;
         ``file_bytes`` (the largest file, mesh or texture) the file and

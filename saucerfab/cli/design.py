@@ -269,7 +269,7 @@ def run(args: argparse.Namespace) -> int:
               f"{pt['min_wall_mm']:g} mm; {rule}")
     if verified is not None:
         from saucerfab.cli.verify import view_line
-        from saucerfab.finish import QUICK_TEXTURE_PX
+        from saucerfab.workflow import QUICK_TEXTURE_PX
 
         print(f"  verified a trial export ({req.printer}, OBJ, {QUICK_TEXTURE_PX} px atlas) at {verified.res} px:")
 
@@ -301,7 +301,7 @@ def _verify(out, printer: str, args: argparse.Namespace):  # type: ignore[no-unt
     import sys
 
     from saucerfab.errors import SaucerfabError
-    from saucerfab.finish import verify_design
+    from saucerfab.workflow import verify_design
 
     def progress(msg: str, fraction: float) -> None:
         if not args.quiet:

@@ -192,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_locked(args: argparse.Namespace, given: dict[str, Any]) -> int:
     """The export, check, verify and summary, with ``--out`` held by :func:`export_lock`."""
-    from saucerfab.fabricate.pipeline import export_design
+    from saucerfab.workflow import make_print
 
     check_other_export(args.design, args.out, args.force)
     options = FabOptions(**given)
@@ -202,26 +202,17 @@ def _run_locked(args: argparse.Namespace, given: dict[str, Any]) -> int:
         if not args.quiet:
             print(f"[{fraction * 100:5.1f}%] {step}", file=sys.stderr, flush=True)
 
-    result = export_design(
-        args.design,
-        args.out,
-        printer=args.printer,
-        cup_diameter_mm=args.cup_diameter_mm,
-        formats=formats,
-        options=options,
-        progress=progress,
-        allow_other_formats=args.allow_format,
-    )
-    profile = result.profile
-
-    from saucerfab.finish import finish_print
-
     def verify_progress(msg: str, fraction: float) -> None:
         if not args.quiet:
             print(f"[verify {fraction * 100:5.1f}%] {msg}", file=sys.stderr, flush=True)
 
-    done = finish_print(result, profile, check=not args.no_check, verify=not args.no_verify, progress=verify_progress)
-    checks = done.checks
+    done = make_print(args.design, args.out, printer=args.printer, cup_diameter_mm=args.cup_diameter_mm,
+                      formats=formats, options=options, allow_other_formats=args.allow_format,
+                      check=not args.no_check, verify=not args.no_verify, progress=progress,
+                      verify_progress=verify_progress)
+    result = done.export
+    profile = result.profile
+    checks = [(c.written, c.report) for c in done.checks]
     exit_code = done.check_exit_code
     if args.json:
         d = result.to_dict()

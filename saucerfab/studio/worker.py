@@ -272,7 +272,7 @@ def _verify(out: Path, request: Any, reporter: _Reporter) -> str | None:
     A verify that fails leaves the design done (it is complete and can be
     exported); the note says why it is not verified.
     """
-    from saucerfab.finish import verify_design
+    from saucerfab.workflow import verify_design
 
     def progress(msg: str, fraction: float) -> None:
         reporter.doc.update(stage="verify", iteration=int(round(100 * fraction)), max_iterations=100)
@@ -316,26 +316,26 @@ def zip_folder(folder: Path, dest: Path) -> None:
 
 
 def _export_job(ws: Workspace, run_id: str, printer: str) -> None:
-    """export_design + finish_print into ``exports/<printer>/``, then its zip; records the export."""
+    """The workflow's make_print into ``exports/<printer>/``, then its zip; records the export."""
     folder = ws.runs / run_id
     out = folder / "exports" / printer
     try:
         from saucerfab.fabricate.options import FabOptions
-        from saucerfab.fabricate.pipeline import export_design, export_lock
-        from saucerfab.finish import finish_print
+        from saucerfab.fabricate.pipeline import export_lock
         from saucerfab.profiles import load_profile
+        from saucerfab.workflow import make_print
 
         entry = ws.read_run(run_id).get("exports", {}).get(printer, {})
         profile = load_profile(printer)
         out.parent.mkdir(exist_ok=True)
         with export_lock(out):
-            result = export_design(folder / "design", out, printer=profile, formats=entry.get("formats"),
-                                   options=FabOptions())
-            done = finish_print(result, profile)
+            done = make_print(folder / "design", out, printer=profile, formats=entry.get("formats"),
+                              options=FabOptions())
+        result = done.export
         zip_folder(out, folder / "exports" / f"{printer}.zip")
         files = sorted(p.relative_to(out).as_posix() for p in out.rglob("*")
                        if p.is_file() and not any(s.startswith(".") for s in p.relative_to(out).parts))
-        checked = [r for _, r in done.checks if r is not None]
+        checked = [c.report for c in done.checks if c.report is not None]
         _set_export(ws, run_id, printer, status="done", error=None, finished=now_iso(), formats=list(result.formats),
                     printable=all(r.exit_code == 0 for r in checked) if checked else None, files=files,
                     zip=f"exports/{printer}.zip", warnings=list(result.warnings), notes=list(done.notes))

@@ -284,7 +284,7 @@ def test_an_export_with_no_format_the_printer_takes_is_refused(tmp_path: Path, c
 def test_the_trial_verify_exports_a_format_the_printer_takes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import saucerfab.fabricate.pipeline as fab
     from saucerfab.errors import ExportError
-    from saucerfab.finish import verify_design
+    from saucerfab.workflow import verify_design
 
     asked: list[object] = []
 

@@ -20,7 +20,7 @@ from saucerfab.check import Limits, check_mesh
 from saucerfab.design import save_design, synthetic_design
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.pipeline import ExportResult, export_design
-from saucerfab.finish import export_limits, finish_print
+from saucerfab.workflow import export_limits, finish_print
 
 
 @pytest.fixture(scope="module")
@@ -57,8 +57,9 @@ def test_finish_print_checks_its_own_export_over_the_default_caps(exported: Expo
     assert lim.max_vertices >= 3 * exported.triangles and lim.max_texture_pixels >= exported.texture_px**2
     done = finish_print(exported, "j55", check=True, verify=False)
     assert len(done.checks) == 4
-    for path, r in done.checks:
-        assert r is not None and r.exit_code == 0, (path.name, r.reason())
+    for c in done.checks:
+        r = c.report
+        assert r is not None and r.exit_code == 0, (c.name, r.reason())
         assert r.stats["triangles"] <= lim.max_triangles
 
 

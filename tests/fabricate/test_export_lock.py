@@ -45,7 +45,7 @@ def test_a_second_export_into_the_same_folder_fails_at_once(
     """Export A (3MF) is held between writing its folder and checking its files;
     export B (PLY) into the same folder meanwhile must fail fast, and leave A's
     files as A reports them."""
-    from saucerfab import finish
+    from saucerfab.workflow import printing as finish
 
     out = tmp_path / "print"
     a_written, b_done = threading.Event(), threading.Event()

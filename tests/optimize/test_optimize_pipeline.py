@@ -180,7 +180,7 @@ def test_cli_design_json_short_options_and_force(tmp_path, capsys) -> None:
     assert d["design"] == str(out)
     assert d["enhancement"]["strategy"] == "subject"
     assert d["verify"]["schema"] == "saucerfab.verify/3"  # the quick verify of a trial export
-    from saucerfab.finish import QUICK_TEXTURE_PX
+    from saucerfab.workflow import QUICK_TEXTURE_PX
 
     # ... with a small atlas: the printer's own would cost a 16x larger bake for a 128 px render
     assert json.loads((out / "verify" / "verify.json").read_text())["texture_px"] == QUICK_TEXTURE_PX
