@@ -59,6 +59,7 @@ import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -220,6 +221,24 @@ def border_ring(shape: tuple[int, int], fraction: float = BORDER_RING_FRACTION) 
     ring[:k] = ring[-k:] = True
     ring[:, :k] = ring[:, -k:] = True
     return ring
+
+
+def intended_background(picture: np.ndarray | None, background: Any = None) -> np.ndarray | None:
+    """The background a design meant around a picture: its ``--background`` if given, else the picture's border colour.
+
+    One rule for what verify's whole view expects outside a frame and the
+    colour the export gives the walls, base and cup seat.
+
+    Args:
+        picture: (H, W, 3) float reference picture in [0, 1], or None.
+        background: the design's ``background`` parameter (``#rrggbb``) or None.
+
+    Returns:
+        (3,) float sRGB in [0, 1], or None when neither is known.
+    """
+    if background is not None:
+        return parse_colour(background)
+    return None if picture is None else estimate_background(picture)
 
 
 def estimate_background(rgb: np.ndarray, alpha: np.ndarray | None = None) -> np.ndarray:

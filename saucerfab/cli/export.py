@@ -24,7 +24,7 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from saucerfab.fabricate.options import SEAT_KINDS, FabOptions
+from saucerfab.fabricate.options import NEUTRAL_WALL_RGB, SEAT_KINDS, FabOptions
 from saucerfab.formats import FORMATS, WRITERS, labels
 from saucerfab.profiles import DEFAULT_PRINTER
 
@@ -89,7 +89,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"plate width around the recess (default {_default('seat_rim_mm')})")
     c = p.add_argument_group("colour and files")
     c.add_argument("--wall-rgb", dest="wall_rgb", type=_rgb,
-                   help=f"sRGB of walls, base and seat (default {_default('wall_rgb')})")
+                   help="sRGB of walls, base and seat (default: the background the design meant around its direct "
+                        "picture, its --background or else the picture's border colour, so the seat and walls do not "
+                        f"stand out beside it; {','.join(map(str, NEUTRAL_WALL_RGB))} for a design without one)")
     c.add_argument("--no-inpaint", dest="inpaint", action="store_const", const="none",
                    help="leave unseen areas in the wall colour instead of continuing their neighbours' colours")
     c.add_argument("--zip-obj", dest="obj_zip", action="store_const", const=True,

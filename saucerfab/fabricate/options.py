@@ -29,6 +29,10 @@ def _pos(name: str, v: float, *, zero_ok: bool = False) -> None:
         raise ConfigError(f"{name} must be {'non-negative' if zero_ok else 'positive'}, got {v!r}")
 
 
+#: the walls' colour for a design that records no picture to take a background from (a neutral grey)
+NEUTRAL_WALL_RGB: tuple[int, int, int] = (200, 200, 200)
+
+
 @dataclass(frozen=True)
 class FabOptions:
     """How to turn a design into a printable, coloured solid.
@@ -52,7 +56,11 @@ class FabOptions:
             resolution for the part's size (``PrinterProfile.texture_px_for``).
         padding_px: gutter around each atlas region filled by edge dilation,
             so bilinear filtering and mipmaps never reach background.
-        wall_rgb: sRGB 8-bit colour of walls, base and seat (a neutral).
+        wall_rgb: sRGB 8-bit colour of walls, base and seat; None (the default): the background
+            the design meant around its direct picture (its ``--background``, else the picture's
+            border colour: :func:`saucerfab.images.intended_background`), so the walls and the cup
+            seat a viewer sees beside the picture do not stand out from it;
+            :data:`NEUTRAL_WALL_RGB` for a design without references.
         inpaint: ``harmonic`` fills faces no viewer sees (``FaceView.NEITHER``)
             with a smooth (harmonic) continuation of their neighbours'
             colours; ``none`` leaves them at ``wall_rgb``.
@@ -71,7 +79,7 @@ class FabOptions:
     seat_rim_mm: float = 4.0
     texture_px: int | None = None
     padding_px: int = 8
-    wall_rgb: tuple[int, int, int] = (200, 200, 200)
+    wall_rgb: tuple[int, int, int] | None = None
     inpaint: Literal["harmonic", "none"] = "harmonic"
     obj_zip: bool = False
     name: str = "saucer"
@@ -98,10 +106,11 @@ class FabOptions:
                 )
         if not isinstance(self.padding_px, int) or not 1 <= self.padding_px <= 64:
             raise ConfigError(f"padding_px must be an integer in [1, 64], got {self.padding_px!r}")
-        rgb = tuple(self.wall_rgb)
-        if len(rgb) != 3 or not all(isinstance(c, int) and 0 <= c <= 255 for c in rgb):
-            raise ConfigError(f"wall_rgb must be three integers in [0, 255], got {self.wall_rgb!r}")
-        object.__setattr__(self, "wall_rgb", rgb)
+        if self.wall_rgb is not None:
+            rgb = tuple(self.wall_rgb)
+            if len(rgb) != 3 or not all(isinstance(c, int) and 0 <= c <= 255 for c in rgb):
+                raise ConfigError(f"wall_rgb must be three integers in [0, 255], got {self.wall_rgb!r}")
+            object.__setattr__(self, "wall_rgb", rgb)
         if self.inpaint not in ("harmonic", "none"):
             raise ConfigError(f"inpaint must be 'harmonic' or 'none', got {self.inpaint!r}")
         if (
@@ -132,5 +141,5 @@ class FabOptions:
     def to_dict(self) -> dict[str, Any]:
         """Plain data (JSON-ready)."""
         d = asdict(self)
-        d["wall_rgb"] = list(self.wall_rgb)
+        d["wall_rgb"] = None if self.wall_rgb is None else list(self.wall_rgb)
         return d

@@ -33,9 +33,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from saucerfab import __version__
 from saucerfab.design import Design, load_design, reference_name
-from saucerfab.errors import ConfigError, DesignError, ExportError
+from saucerfab.errors import ConfigError, DesignError, ExportError, SaucerfabError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.profiles import DEFAULT_PRINTER, PrinterProfile, load_profile
 
@@ -240,6 +242,30 @@ def export_printer(design: Design, printer: str | PrinterProfile | None) -> tupl
         ) from None
 
 
+def surround_rgb(design: Design) -> tuple[int, int, int]:
+    """The walls', base's and cup seat's colour by default: the background meant around the direct picture.
+
+    :func:`saucerfab.images.intended_background` of the design's direct
+    reference and its ``--background``: a viewer sees the seat plate and the
+    walls beside the picture, where the design meant its background (issue 43:
+    a grey plate read as stray). :data:`~saucerfab.fabricate.options.NEUTRAL_WALL_RGB`
+    for a design that records neither (a synthetic one).
+    """
+    from saucerfab.fabricate.options import NEUTRAL_WALL_RGB
+    from saucerfab.images import intended_background
+
+    ref = design.references.get("direct")
+    picture = None if ref is None else np.asarray(ref, np.float64) / 255.0
+    try:
+        c = intended_background(picture, design.parameters.get("background"))
+    except SaucerfabError:  # an unreadable recorded colour: the neutral, as for a design without one
+        c = None
+    if c is None:
+        return NEUTRAL_WALL_RGB
+    r, g, b = (int(round(float(v) * 255.0)) for v in np.clip(c, 0.0, 1.0))
+    return (r, g, b)
+
+
 def _resolve_cup(design: Design, cup_diameter_mm: float | None) -> Design:
     if cup_diameter_mm is None:
         return design
@@ -326,6 +352,10 @@ def export_design(
             f"texture_px {opts.texture_px} exceeds what {profile.name} accepts ({profile.max_texture_px} px)"
         )
     dsg = _resolve_cup(loaded, cup_diameter_mm)
+    if opts.wall_rgb is None:  # recorded resolved in export.json: the colour the files carry
+        from dataclasses import replace as _replace
+
+        opts = _replace(opts, wall_rgb=surround_rgb(dsg))
     scene = dsg.scene
     t = step("load", t)
 

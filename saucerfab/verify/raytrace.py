@@ -466,3 +466,69 @@ def render_positions(ps: PositionScene, eye: tuple[float, float, float], view: V
     for k, a in enumerate(ps.axes):
         xyz[seen, a] = (img[seen, k] / cov[seen] - POSITION_OFFSET) * ps.span + ps.low[a]
     return {"xyz": xyz, "full": full}
+
+
+#: the part pass (:func:`part_scene`): the top emits white, every other surface of the part (walls, base,
+#: seat plate) yellow, and the cup reflects green and blue only, so that a pixel's red is the share of it
+#: seeing the part directly, its green the share seeing the part either way, and its blue the share seeing
+#: the top either way
+PART_TOP_RGB = (1.0, 1.0, 1.0)
+PART_REST_RGB = (1.0, 1.0, 0.0)
+PART_MIRROR_RGB = (0.0, 1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class PartScene:
+    """The printed part, every surface of it, with the mirror cup: see :func:`part_scene`.
+
+    ``origin``: (3,) mm, the file-frame point at the render frame's origin (:func:`render_origin`).
+    """
+
+    scene: Any
+    extent_mm: float
+    origin: np.ndarray
+
+
+@dataclass(frozen=True)
+class PartCoverage:
+    """What of the part each pixel sees (:func:`render_part`), shares of the pixel's area in [0, 1].
+
+    Attributes:
+        direct: (S, S) any surface of the part seen directly.
+        reflected: (S, S) any surface of the part seen in the mirror.
+        top: (S, S) the part's coloured top seen, directly or in the mirror.
+    """
+
+    direct: np.ndarray
+    reflected: np.ndarray
+    top: np.ndarray
+
+
+def part_scene(surface: PrintedSurface, cup: CupSpec) -> PartScene:
+    """A scene of the whole printed part (top, walls, base, seat plate) and the mirror cup that tells, per
+    pixel, whether the part is seen, directly or in the mirror, and whether its top is (:data:`PART_TOP_RGB`)."""
+    mi = mitsuba()
+    origin = render_origin(cup)
+    entries: dict[str, Any] = {"type": "scene", "integrator": INTEGRATOR}
+    for is_top, rgb in ((True, PART_TOP_RGB), (False, PART_REST_RGB)):
+        faces = surface.faces[surface.top == is_top]
+        if faces.size == 0:
+            continue
+        key = f"part_{'top' if is_top else 'rest'}"
+        entries[key] = _mesh(mi, key, surface.vertices - origin, faces, bsdf=BLACK,
+                             emitter={"type": "area", "radiance": {"type": "rgb", "value": list(rgb)}})
+    mirror = {**MIRROR, "specular_reflectance": {"type": "rgb", "value": list(PART_MIRROR_RGB)}}
+    entries.update(_cup_meshes(mi, cup, origin, mirror))
+    return PartScene(mi.load_dict(entries), float(np.ptp(surface.vertices, axis=0).max()), origin)
+
+
+def render_part(ps: PartScene, eye: tuple[float, float, float], view: ViewSpec, size: int, spp: int) -> PartCoverage:
+    """The part pass of ``view`` from ``eye`` (mm), ``size`` x ``size`` pixels at ``spp`` samples per pixel.
+
+    Its samples are :func:`render_positions`' at the same size and ``spp`` (the same sensor and sampler), so
+    at one sample a pixel the two passes describe the same ray.
+    """
+    mi = mitsuba()
+    sensor = _sensor(mi, eye, view, size, spp, ps.extent_mm, ps.origin)
+    img = np.clip(np.array(mi.render(ps.scene, sensor=sensor, spp=int(spp)), np.float64), 0.0, 1.0)
+    return PartCoverage(direct=img[..., 0], reflected=np.clip(img[..., 1] - img[..., 0], 0.0, 1.0), top=img[..., 2])

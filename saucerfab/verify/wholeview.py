@@ -4,29 +4,38 @@ Verify's frames show each picture where the design put it; a person sees
 the whole piece. From an eye, one sensor takes in the whole saucer and the
 cup (:func:`whole_view_spec`), and the print is rendered through it as the
 frames are (:class:`~.raytrace.PrintTracer`: the texture emitted, the cup a
-mirror), with position passes of the printed top (:func:`~.raytrace.render_positions`)
-telling, per pixel, the saucer point seen, and whether directly or in the mirror.
+mirror), with a part pass (:func:`~.raytrace.render_part`) telling, per pixel
+and per sub-sample, whether the printed part is seen - any surface of it: top,
+walls, base, seat plate - directly or in the mirror, and whether it is the top,
+and position passes of the printed top (:func:`~.raytrace.render_positions`)
+telling the top's point seen.
 
-**The ideal whole view**, per pixel that sees the saucer's top fully:
+**The ideal whole view**, per pixel that sees the printed part fully (all of it
+directly, or all of it in the mirror), is the mean over the pixel's
+sub-samples of:
 
-* seen directly: the direct reference picture's colour where the point lies
+* the top seen directly: the direct reference picture's colour where the point lies
   inside the direct frame as that frame projects onto the saucer (the point
   mapped through the design eye's direct camera to frame pixels), else the
   direct picture's background colour;
-* seen in the mirror: the reflected reference's colour where the point lies
+* the top seen in the mirror: the reflected reference's colour where the point lies
   in the region the reflected frame shows of the saucer (the design eye's
   reflected frame, whose pixels' saucer points come from a position pass and
   are inverted locally, :class:`FrameMaps`),
-  else the reflected picture's background colour.
+  else the reflected picture's background colour;
+* any other surface of the part (walls, base, seat plate; only the top can lie
+  in a frame): the background colour of the way it is seen - a person sees
+  every surface of the piece, and outside the frames each should read as the
+  background.
 
 The background colour is the design's ``--background`` when ``export.json``
 records one, else the picture's own border colour
 (:func:`saucerfab.images.estimate_background`: the median of its outer ring).
-Pixels that see no saucer (the table, the cup's rim, the mirror showing
-anything else, the part's walls and seat plate) are left out of every score,
-and so is the outline of what sees it (a pixel counts when it and its four
-neighbours see the top fully: an outline pixel can hold a sliver of the
-table that the coverage samples miss).
+Pixels that see no part (the table, the cup's rim, the mirror showing
+anything else) or see it partly, or partly directly and partly in the mirror,
+are left out of every score, and so is the outline of what sees it (a pixel
+counts when it and its four neighbours see the part fully: an outline pixel
+can hold a sliver of the table that the coverage samples miss).
 
 **Scores** (:class:`WholeView`):
 
@@ -57,7 +66,9 @@ from saucerfab.verify.raytrace import (
     FULL_COVERAGE,
     PositionScene,
     PrintTracer,
+    part_scene,
     position_scene,
+    render_part,
     render_positions,
     sampling_variance,
 )
@@ -157,12 +168,9 @@ def background_colours(references: dict[str, np.ndarray], background: Any = None
         references: view -> (H, W, 3) float reference picture in [0, 1].
         background: the design's ``background`` parameter (``#rrggbb``) or None.
     """
-    from saucerfab.images import estimate_background, parse_colour
+    from saucerfab.images import intended_background
 
-    if background is not None:
-        c = parse_colour(background)
-        return {v: c for v in references}
-    return {v: estimate_background(img) for v, img in references.items()}
+    return {v: intended_background(img, background) for v, img in references.items()}
 
 
 def _sample(img: np.ndarray, cr: np.ndarray) -> np.ndarray:
@@ -284,11 +292,13 @@ class WholeView:
     """One eye's whole view, its ideal and its scores (see the module docstring).
 
     Attributes:
-        rgb: (S, S, 3) the render. ideal: (S, S, 3) the ideal whole view (grey where no saucer is seen).
-        direct, mirror: (S, S) bool, the saucer's top seen fully directly / in the mirror.
+        rgb: (S, S, 3) the render. ideal: (S, S, 3) the ideal whole view (grey where no part is seen).
+        direct, mirror: (S, S) bool, the printed part (any surface) seen fully directly / in the mirror.
         in_direct, in_mirror: (S, S) bool, of those, the points inside the direct / a reflected frame.
         stray: (S, S) bool, surround pixels farther than :data:`STRAY_DISTANCE` from their background.
         psnr_db, stray_direct, stray_reflected, width_share: the scores (NaN where nothing to score).
+        other: (S, S) float in [0, 1], the share of each pixel that sees a surface of the part other than
+            its top (walls, base, seat plate); None when not measured.
     """
 
     rgb: np.ndarray
@@ -302,10 +312,11 @@ class WholeView:
     stray_direct: float
     stray_reflected: float
     width_share: float
+    other: np.ndarray | None = None
 
     @property
     def pixels(self) -> int:
-        """Pixels scored (the saucer's top seen fully)."""
+        """Pixels scored (the printed part seen fully)."""
         return int((self.direct | self.mirror).sum())
 
     def surround_pixels(self) -> tuple[int, int]:
@@ -347,12 +358,13 @@ def width_share(in_mirror: np.ndarray, cup: CupSpec, eye: tuple[float, float, fl
 
 def score_whole_view(rgb: np.ndarray, ideal: np.ndarray, noise: np.ndarray | None, direct: np.ndarray,
                      mirror: np.ndarray, in_direct: np.ndarray, in_mirror: np.ndarray,
-                     backgrounds: tuple[np.ndarray, np.ndarray], width: float) -> WholeView:
+                     backgrounds: tuple[np.ndarray, np.ndarray], width: float,
+                     other: np.ndarray | None = None) -> WholeView:
     """The scores of a rendered whole view against its ideal (pure arrays; see :class:`WholeView`).
 
     Args:
         backgrounds: the direct and the reflected picture's background colours.
-        width: :func:`width_share`.
+        width: :func:`width_share`. other: :attr:`WholeView.other`.
     """
     from saucerfab.verify.metrics import psnr
 
@@ -362,6 +374,7 @@ def score_whole_view(rgb: np.ndarray, ideal: np.ndarray, noise: np.ndarray | Non
         rgb=rgb, ideal=ideal, direct=direct, mirror=mirror, in_direct=in_direct, in_mirror=in_mirror, stray=stray,
         psnr_db=psnr(rgb, ideal, direct | mirror, noise),
         stray_direct=share(stray, around_direct), stray_reflected=share(stray, around_mirror), width_share=width,
+        other=other,
     )
 
 
@@ -383,6 +396,7 @@ class WholeViews:
         self._top_xy = position_scene(surface.vertices, top, scene.cup, axes=(0, 1))
         self._top_z = position_scene(surface.vertices, top, scene.cup, axes=(2, 2))
         self.maps = FrameMaps(self._top_xy, self._top_z, scene.camera, scene.views, size)
+        self._part = part_scene(surface, scene.cup)
 
     def render(self, eye: tuple[float, float, float], spp: int) -> WholeView:
         """The whole view from ``eye`` (mm) at ``spp`` samples per pixel, with its ideal and scores."""
@@ -397,38 +411,52 @@ class WholeViews:
         pos = render_positions(self._top_xy, eye, view, n, 1)["xyz"][..., :2]
         z = render_positions(self._top_z, eye, view, n, 1)["xyz"][..., 2]
         sub = np.concatenate([pos, z[..., None]], -1).reshape(s, SUPERSAMPLE, s, SUPERSAMPLE, 3)
-        sub = sub.transpose(0, 2, 1, 3, 4).reshape(s, s, m, 3)  # each pixel's points
-        ok = np.isfinite(sub).all((-1, -2))
-        direct = ok & (r.direct >= FULL_COVERAGE)
-        mirror = ok & (r.reflected >= FULL_COVERAGE) & ~direct
-        # a pixel on the saucer's outline can be seen fully by the coverage samples and still hold a sliver of
-        # the table in the colour samples (read as stray): only pixels whose four neighbours see the top count
+        sub = sub.transpose(0, 2, 1, 3, 4).reshape(s, s, m, 3)  # each pixel's points of the top
+        # what of the part each pixel's area (spp samples) and each of its points (the position passes' rays)
+        # sees: every surface a person sees counts, not only the top
+        part = render_part(self._part, eye, view, s, spp)
+        sub_part = render_part(self._part, eye, view, n, 1)
+
+        def points(a: np.ndarray) -> np.ndarray:
+            return a.reshape(s, SUPERSAMPLE, s, SUPERSAMPLE).transpose(0, 2, 1, 3).reshape(s, s, m) > 0.5
+
+        # a point is on the top where the part pass says so: the top passes hold no other surface, so they
+        # also 'see' the top behind a wall or the seat plate; a top point they miss leaves its pixel out
+        on_top = points(sub_part.top) & np.isfinite(sub).all(-1)
+        lost = points(sub_part.top) & ~np.isfinite(sub).all(-1)
+        direct = (part.direct >= FULL_COVERAGE) & points(sub_part.direct).all(-1) & ~lost.any(-1)
+        mirror = (part.reflected >= FULL_COVERAGE) & points(sub_part.reflected).all(-1) & ~lost.any(-1) & ~direct
+        # a pixel on the part's outline can be seen fully by the coverage samples and still hold a sliver of
+        # the table in the colour samples (read as stray): only pixels whose four neighbours see the part count
         core = binary_erosion(direct | mirror, np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool))
         direct, mirror = direct & core, mirror & core
         ideal = np.broadcast_to(np.asarray(NOT_SAUCER_RGB, np.float32), r.rgb.shape).copy()
         in_frame = {"direct": np.zeros((s, s), bool), "mirror": np.zeros((s, s), bool)}
         for seen, kind, names in ((direct, "direct", ["direct"]),
                                   (mirror, "mirror", [v for v in self.scene.views if v != "direct"])):
-            pts = sub[seen].reshape(-1, 3)
+            top = on_top[seen].reshape(-1)  # walls, base and seat plate lie in no frame: their ideal is the background
+            pts = sub[seen].reshape(-1, 3)[top]
             colour = np.broadcast_to(self.backgrounds["direct" if kind == "direct" else "reflected"],
-                                     (len(pts), 3)).astype(np.float32)
-            hit = np.zeros(len(pts), bool)
+                                     (top.size, 3)).astype(np.float32)
+            hit = np.zeros(top.size, bool)
             for name in names:
                 cr, inside = self.maps.locate(name, pts)
-                inside &= ~hit  # the first frame that holds a point gives its colour
+                inside &= ~hit[top]  # the first frame that holds a point gives its colour
                 if inside.any():
                     ref = self.references[name]
-                    colour[inside] = _sample(ref, cr[inside] * (ref.shape[0] / self.maps.size))
-                hit |= inside
+                    where = np.flatnonzero(top)[inside]
+                    colour[where] = _sample(ref, cr[inside] * (ref.shape[0] / self.maps.size))
+                    hit[where] = True
             ideal[seen] = colour.reshape(-1, m, 3).mean(axis=1)
             in_frame[kind][seen] = hit.reshape(-1, m).mean(axis=1) >= 0.5  # the pixel lies mostly in a frame
         width = width_share(in_frame["mirror"], self.scene.cup, eye, view)
         return score_whole_view(r.rgb, ideal, sampling_variance(r), direct, mirror, in_frame["direct"],
-                                in_frame["mirror"], (self.backgrounds["direct"], self.backgrounds["reflected"]), width)
+                                in_frame["mirror"], (self.backgrounds["direct"], self.backgrounds["reflected"]), width,
+                                other=np.clip(part.direct + part.reflected - part.top, 0.0, 1.0))
 
 
 def stray_map(wv: WholeView) -> np.ndarray:
-    """(S, S, 3) float: the render in dim grey, stray pixels in colour, pixels that see no saucer flat grey."""
+    """(S, S, 3) float: the render in dim grey, stray pixels in colour, pixels that see no part flat grey."""
     grey = np.repeat(np.asarray(wv.rgb, np.float32).mean(axis=2, keepdims=True), 3, axis=2) * 0.5 + 0.25
     out = np.where((wv.direct | wv.mirror)[..., None], grey, np.asarray(NOT_SAUCER_RGB, np.float32))
     out[wv.stray & wv.direct] = STRAY_DIRECT_RGB

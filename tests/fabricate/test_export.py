@@ -35,7 +35,7 @@ from PIL import Image
 from saucerfab.cli import main
 from saucerfab.design import Design, FaceView, save_design, synthetic_design
 from saucerfab.errors import ConfigError, DesignError, ExportError, MeshError
-from saucerfab.fabricate.options import FabOptions
+from saucerfab.fabricate.options import NEUTRAL_WALL_RGB, FabOptions
 from saucerfab.fabricate.pipeline import ExportResult, export_design
 from saucerfab.formats import FORMATS
 from saucerfab.profiles import PrinterProfile, load_profile
@@ -370,7 +370,7 @@ def test_ply_vertex_colours_and_geometry(exported: ExportResult, scene_json: dic
     close = np.abs(rgb[top] - want).max(axis=1) <= 8
     assert close[ok].mean() > 0.9
     walls = p[:, 2] < scene_json["seat"]["base_z"] + 1e-6  # the bottom
-    assert (rgb[walls] == np.array(FabOptions().wall_rgb)).all()
+    assert (rgb[walls] == np.array(NEUTRAL_WALL_RGB)).all()
 
 
 def test_vrml_reads_back_with_meshlab(exported: ExportResult, scene_json: dict, design: Design) -> None:
@@ -476,7 +476,7 @@ def test_unseen_faces_get_a_smooth_continuation_not_grey(exported: ExportResult,
     r0, r1 = int(np.ceil(lay.row_px[rs.stop])) + 1, int(np.floor(lay.row_px[rs.start])) - 1
     block = image[r0:r1, c0:c1]
     assert block.shape[0] > 8 and block.shape[1] > 8
-    grey = np.array(FabOptions().wall_rgb, np.float64)
+    grey = np.array(NEUTRAL_WALL_RGB, np.float64)
     assert (np.abs(block - grey).max(axis=2) > 3).mean() > 0.9
     # harmonic: the discrete Laplacian vanishes up to 8-bit rounding, although the
     # checker under these faces has hard edges (Laplacians in the hundreds)
@@ -741,3 +741,32 @@ def test_an_unknown_format_is_still_refused(design: Design, tmp_path: Path, caps
     err = capsys.readouterr().err
     assert code == 2 and "unknown export format 'fbx'" in err and "Traceback" not in err
     assert not (tmp_path / "v").exists()
+
+
+# --------------------------------------------------------------------------- the walls' colour (issue 43)
+
+
+def test_walls_and_seat_take_the_background_meant_around_the_direct_picture(design: Design, tmp_path: Path) -> None:
+    from saucerfab.fabricate.pipeline import surround_rgb
+
+    cream = np.zeros((32, 32, 3), np.uint8)
+    cream[...] = (250, 240, 220)
+    cream[12:20, 12:20] = (200, 20, 40)  # a subject in the middle: the border is the background
+    made = replace(design, references={"direct": cream, "reflected": cream})
+    assert surround_rgb(made) == (250, 240, 220)
+    assert surround_rgb(replace(made, parameters={**made.parameters, "background": "#102030"})) == (16, 32, 48)
+    assert surround_rgb(design) == NEUTRAL_WALL_RGB  # no references: the neutral grey
+    res = export_design(made, tmp_path / "p", printer=ALL_FORMATS, cup_diameter_mm=CUP_MM, formats=["ply"],
+                        options=FabOptions(texture_px=ATLAS))
+    summary = json.loads(res.summary_json.read_text())
+    assert summary["options"]["wall_rgb"] == [250, 240, 220]  # recorded as the files carry it
+    import trimesh
+
+    mesh = trimesh.load(res.out / "saucer.ply", process=False)
+    z = np.asarray(mesh.vertices)[:, 2]
+    bottom = np.asarray(mesh.visual.vertex_colors)[z < z.min() + 1e-6, :3]
+    assert (bottom == (250, 240, 220)).all()
+    # told otherwise, the walls take the colour given
+    res = export_design(made, tmp_path / "q", printer=ALL_FORMATS, cup_diameter_mm=CUP_MM, formats=["ply"],
+                        options=FabOptions(texture_px=ATLAS, wall_rgb=(1, 2, 3)))
+    assert json.loads(res.summary_json.read_text())["options"]["wall_rgb"] == [1, 2, 3]

@@ -260,3 +260,50 @@ def test_json_validates_carries_the_whole_views_and_the_exit_status_follows_max_
     assert "whole      design" in out and "STRAY" in out and "stray at most 0%" in out
     assert main([*args, "--max-stray", "2", "-o", str(tmp_path / "c")]) == 2
     assert "--max-stray" in capsys.readouterr().err
+
+
+#: the wall test's band of ambiguity: a pixel part top, part wall reads stray when its wall share times the
+#: wall's distance from the background passes STRAY_DISTANCE; the render and the part pass sample the pixel
+#: at different points (16 each: their shares differ by up to 2-3 samples), so within this much wall share
+#: of the threshold either reading is right
+WALL_SHARE_BAND = 0.25
+
+
+@pytest.mark.parametrize("wall", [(0, 0, 0), (255, 255, 255)])
+def test_walls_and_seat_plate_in_view_are_stray_where_they_are_not_the_background(tmp_path, wall):
+    from dataclasses import replace
+
+    from saucerfab.design import synthetic_design
+    from saucerfab.fabricate.options import FabOptions
+    from saucerfab.fabricate.pipeline import export_design
+    from saucerfab.verify.printfolder import find_mesh_files, read_surface
+
+    # a print whose top is the background (white) everywhere: only its walls, base and seat plate can be stray
+    d = synthetic_design(shape="plane", resolution=20, texture_size=64)
+    refs8 = {v: np.full((32, 32, 3), 255, np.uint8) for v in ("direct", "reflected")}
+    d = replace(d, texture=np.full_like(d.texture, 255), references=refs8)
+    folder = tmp_path / "print"
+    export_design(d, folder, printer="bureau", formats=["obj"], cup_diameter_mm=80, options=FabOptions(wall_rgb=wall))
+    scene = load_print_scene(folder)
+    fmt, path = find_mesh_files(folder)[0]
+    surface = read_surface(path, fmt, scene)
+    assert (~surface.top).any()
+    refs = {k: v.astype(np.float32) / 255.0 for k, v in refs8.items()}
+    bg = background_colours(refs)
+    wv = WholeViews(PrintTracer(surface, scene.cup), surface, scene, refs, bg, RES).render(scene.camera, 16)
+    distance = float(np.linalg.norm(np.asarray(wall) / 255.0 - bg["direct"]))
+    for seen, framed, stray_share in ((wv.direct, wv.in_direct, wv.stray_direct),
+                                      (wv.mirror, wv.in_mirror, wv.stray_reflected)):
+        surround = seen & ~framed
+        # the walls and the plate are seen in both surrounds (the classification counts them as the part)
+        assert (surround & (wv.other >= 0.999)).sum() > 20
+        # the surround pixels that see the wall or the plate enough to be stray, from the classification
+        wall_px = surround & (wv.other * distance > STRAY_DISTANCE)
+        sure = np.abs(wv.other * distance - STRAY_DISTANCE) > WALL_SHARE_BAND * distance
+        assert ((wv.stray & surround) == wall_px)[sure].all()
+        n_unsure = int((surround & ~sure).sum())
+        assert abs(stray_share - wall_px.sum() / surround.sum()) <= n_unsure / surround.sum()
+        if distance == 0.0:
+            assert stray_share == 0.0
+        else:
+            assert stray_share > 0.5  # most of each surround is wall or plate
