@@ -173,10 +173,13 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
             status = page.locator("#run-status").inner_text()
             if status in ("failed", "cancelled", "interrupted"):
                 raise AssertionError(f"the design ended {status}: {page.locator('#run-error').inner_text()}")
+            # the looks first, then the line: the page sets both in one update, so a line read after the
+            # looks were seen is that update's or a later one (read the other way round, an update landing
+            # between the two reads showed a stale line beside new looks on a loaded machine)
+            looks = page.locator("#looks").is_visible() and _images_loaded(page, "#looks-gallery img") >= 3
             line = page.locator("#progress-stage").inner_text()
             if not seen["stage"] and re.search(r"Stage \d+ of 3\b", line):
                 seen["stage"] = True
-            looks = page.locator("#looks").is_visible() and _images_loaded(page, "#looks-gallery img") >= 3
             if looks and status == "running" and PREPARING in line:
                 seen["stale"] = line  # the first look is shown, yet the line still waits for it
             if status == "running":
