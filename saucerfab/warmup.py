@@ -12,22 +12,6 @@ import sys
 import time
 
 
-def numba_started() -> bool:
-    """Whether numba's CPU compiler has started in this process (a kernel compiled or loaded from its cache).
-
-    Starting it (LLVM and numba's CPU target) takes about 0.3-0.4 s once per
-    process; after that, loading one more cached kernel takes milliseconds. A
-    reader with a numpy path and a numba path for the same input can take
-    the numba one for smaller inputs when this is true. numba makes its
-    target context on first use; should that attribute ever be renamed, this
-    answers False, which only keeps the cold-process choice
-    (``tests/check/test_check_obj_fast.py`` pins it).
-    """
-    registry = sys.modules.get("numba.core.registry")
-    target = getattr(registry, "cpu_target", None)
-    return target is not None and "_toplevel_target_context" in vars(target)
-
-
 def warm_up_check() -> list[str]:
     """Compile the checker's numba kernels (large meshes, meshopt, the OBJ and 3MF bulk parsers); return their names."""
     from saucerfab.check.kernels_warmup import warm_up as kernels_warm_up

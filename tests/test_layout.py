@@ -157,3 +157,13 @@ def test_no_upward_imports_between_the_rooms() -> None:
     found = upward_imports(import_graph())
     assert not found, ("imports of a higher room (move what both need down into the lower room, or let the "
                        "front door pass it in): " + "; ".join(found))
+
+
+def test_the_checker_imports_nothing_above_it() -> None:
+    """The checker is the base install's whole job: it imports no orchestration (warmup, demo, workflow,
+    the front doors) and none of the design's modules, so ``saucerfab check`` stands on its own."""
+    above = ("saucerfab.warmup", "saucerfab.demo", "saucerfab.workflow", "saucerfab.cli", "saucerfab.batch",
+             "saucerfab.studio", "saucerfab.optimize", "saucerfab.render", "saucerfab.fabricate")
+    bad = sorted(f"{m} -> {t}" for m, targets in import_graph().items() if m.startswith("saucerfab.check")
+                 for t in targets if t.startswith(above))
+    assert not bad, bad

@@ -22,6 +22,7 @@ saucerfab numba``) for the fast paths without torch.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -33,6 +34,22 @@ F = TypeVar("F", bound=Callable[..., Any])
 def have_numba() -> bool:
     """Whether numba is installed (found without importing it: the import alone takes ~0.7 s)."""
     return installed("numba")
+
+
+def numba_started() -> bool:
+    """Whether numba's CPU compiler has started in this process (a kernel compiled or loaded from its cache).
+
+    Starting it (LLVM and numba's CPU target) takes about 0.3-0.4 s once per
+    process; after that, loading one more cached kernel takes milliseconds. A
+    reader with a numpy path and a numba path for the same input can take
+    the numba one for smaller inputs when this is true. numba makes its
+    target context on first use; should that attribute ever be renamed, this
+    answers False, which only keeps the cold-process choice
+    (``tests/check/test_check_obj_fast.py`` pins it).
+    """
+    registry = sys.modules.get("numba.core.registry")
+    target = getattr(registry, "cpu_target", None)
+    return target is not None and "_toplevel_target_context" in vars(target)
 
 
 def njit(**options: Any) -> Callable[[F], F]:

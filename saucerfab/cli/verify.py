@@ -30,7 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         DEFAULT_RES,
         DEFAULT_SPP,
     )
-    from saucerfab.verify.eyes import DEFAULT_IPD_MM
+    from saucerfab.eyes import DEFAULT_IPD_MM
 
     p.add_argument("folder", nargs="?", metavar="PRINT_DIR", help="a folder written by 'saucerfab export'")
     p.add_argument("--eyes", default=None, metavar="MODE",

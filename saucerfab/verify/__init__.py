@@ -16,7 +16,7 @@ from saucerfab.verify.core import (
     stand_sentence,
     verify_print,
 )
-from saucerfab.verify.eyes import EyeSpec, parse_eyes
+from saucerfab.eyes import EyeSpec, parse_eyes
 from saucerfab.verify.printfolder import VerifyInputError, reference_name
 from saucerfab.verify.results import SCHEMA, FileScore, VerifyResult, ViewScore
 

@@ -232,14 +232,14 @@ def test_warm_up_runs() -> None:
 
 
 def test_numba_started_tells_a_cold_process_from_a_warm_one() -> None:
-    """``saucerfab.warmup.numba_started`` reads an attribute numba makes on first use: a
+    """``saucerfab.check.jit.numba_started`` reads an attribute numba makes on first use: a
     fresh process says False until a kernel has run, then True (a numba release that
     renamed it would fail here, not quietly keep the slow parser)."""
     import subprocess
     import sys
 
     script = (
-        "from saucerfab.warmup import numba_started\n"
+        "from saucerfab.check.jit import numba_started\n"
         "import numba\n"
         "before = numba_started()\n"
         "numba.njit(lambda x: x + 1)(1)\n"
@@ -253,9 +253,9 @@ def test_numba_started_tells_a_cold_process_from_a_warm_one() -> None:
 def test_the_fast_parser_is_tried_from_a_smaller_size_once_numba_has_started(
     started: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import saucerfab.warmup
+    import saucerfab.check.jit
 
-    monkeypatch.setattr(saucerfab.warmup, "numba_started", lambda: started)
+    monkeypatch.setattr(saucerfab.check.jit, "numba_started", lambda: started)
     assert obj.FAST_OBJ_BYTES_WARM < obj.FAST_OBJ_BYTES
     assert obj._try_fast_parser(obj.FAST_OBJ_BYTES)
     assert not obj._try_fast_parser(obj.FAST_OBJ_BYTES_WARM - 1)

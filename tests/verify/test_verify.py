@@ -24,7 +24,7 @@ from saucerfab.design import Design
 from saucerfab.fabricate.pipeline import export_design
 from saucerfab.verify import EyeSpec, parse_eyes, verify_print
 from saucerfab.verify.core import FULL_COVERAGE, resize_box
-from saucerfab.verify.eyes import eye_positions
+from saucerfab.eyes import eye_positions
 from saucerfab.verify.metrics import PSNR_CAP_DB, best_shift, psnr, shifted, ssim
 
 RES = 96

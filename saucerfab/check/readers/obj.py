@@ -44,18 +44,18 @@ FAST_OBJ_BYTES = 8 << 20
 """OBJ files this large (after joining continued lines) try the numba parser, :mod:`.obj_fast`, first: below
 about 8 MB the 1.5 s of importing numba and loading its kernels in a fresh process outweighs the gain."""
 FAST_OBJ_BYTES_WARM = 1 << 20
-"""The same once numba has started in this process (:func:`saucerfab.warmup.numba_started`: a design's quick
+"""The same once numba has started in this process (:func:`saucerfab.check.jit.numba_started`: a design's quick
 verify, an export's verify): loading the parser's cached kernel then takes about 40 ms, and the trial export's
 2.9 MB OBJ is read in 20 ms instead of 0.2-0.45 s. Below 1 MB the numpy/regex parser takes less than the load."""
 
 
 def _try_fast_parser(n_bytes: int) -> bool:
     """Whether :func:`read_obj` tries :mod:`.obj_fast` on a file of ``n_bytes`` (the one place that decides)."""
-    from saucerfab.warmup import numba_started
+    from saucerfab.check import jit  # looked up at the call, so a test can stand in for it
 
     if not have_numba():  # the checker's install without the 'design' extra: the numpy/regex parser reads all
         return False
-    return n_bytes >= FAST_OBJ_BYTES or (n_bytes >= FAST_OBJ_BYTES_WARM and numba_started())
+    return n_bytes >= FAST_OBJ_BYTES or (n_bytes >= FAST_OBJ_BYTES_WARM and jit.numba_started())
 
 
 @dataclass
