@@ -63,7 +63,7 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.errors import ConfigError, ImageError
+from saucerfab.errors import ConfigError, ImageError, SaucerfabError
 from saucerfab.imageio import PixelLimitError, open_bounded
 
 #: default limits for untrusted images (checked before decoding)
@@ -223,22 +223,48 @@ def border_ring(shape: tuple[int, int], fraction: float = BORDER_RING_FRACTION) 
     return ring
 
 
-def intended_background(picture: np.ndarray | None, background: Any = None) -> np.ndarray | None:
-    """The background a design meant around a picture: its ``--background`` if given, else the picture's border colour.
+def intended_background(
+    picture: np.ndarray | None, background: Any = None, alpha: np.ndarray | None = None
+) -> np.ndarray | None:
+    """The background a design means around a picture: its ``--background`` if given, else the picture's border colour.
 
-    One rule for what verify's whole view expects outside a frame and the
-    colour the export gives the walls, base and cup seat.
+    One rule for the padding of a fitted picture (:func:`fit_square`,
+    :func:`saucerfab.masks.prepare_image`), what verify's whole view expects
+    outside a frame, and the colour the export gives the walls, base and cup
+    seat (the last two take the colour a design.json records through
+    :func:`recorded_background`).
 
     Args:
-        picture: (H, W, 3) float reference picture in [0, 1], or None.
-        background: the design's ``background`` parameter (``#rrggbb``) or None.
+        picture: (H, W, 3) float picture in [0, 1], or None.
+        background: ``#rrggbb`` or three floats in [0, 1], or None.
+        alpha: (H, W) or None: only ring pixels at least half opaque count.
 
     Returns:
         (3,) float sRGB in [0, 1], or None when neither is known.
+
+    Raises:
+        ConfigError: ``background`` is not a colour.
     """
     if background is not None:
         return parse_colour(background)
-    return None if picture is None else estimate_background(picture)
+    return None if picture is None else estimate_background(picture, alpha)
+
+
+def recorded_background(parameters: Any) -> str | None:
+    """The ``--background`` a design.json's ``parameters`` record, or None.
+
+    None too for a value that is not a colour (design checked it when it was
+    given, so only a damaged file has one): the picture's own border colour
+    stands for it then, in the export's walls and in verify's whole view alike.
+    """
+    value = parameters.get("background") if isinstance(parameters, dict) else None
+    if value is None:
+        return None
+    try:
+        parse_colour(value)
+    except SaucerfabError:
+        return None
+    return value
 
 
 def estimate_background(rgb: np.ndarray, alpha: np.ndarray | None = None) -> np.ndarray:
@@ -619,7 +645,7 @@ def fit_square(
     if not isinstance(size, (int, np.integer)) or size < 1:
         raise ValueError(f"size must be a positive integer, got {size!r}")
     rgb, alpha = _split(img)
-    bg = estimate_background(rgb, alpha) if background is None else parse_colour(background)
+    bg = intended_background(rgb, background, alpha)
     return _fit_into(rgb, alpha, int(size), int(size), bg, fit)
 
 

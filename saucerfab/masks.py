@@ -31,11 +31,11 @@ from saucerfab.images import (
     ViewImage,
     border_ring,
     estimate_background,
+    intended_background,
     fit_plane,
     fit_square,
     flatten_alpha,
     load_image,
-    parse_colour,
 )
 
 #: a mask covering less than this fraction of the content (or more than
@@ -324,7 +324,7 @@ def prepare_image(
         ImageError: as those functions do; nothing is written anywhere.
     """
     img = loaded if loaded is not None else load_image(path, max_pixels=max_pixels, max_bytes=max_bytes)
-    bg = estimate_background(img.rgb, img.alpha) if background is None else parse_colour(background)
+    bg = intended_background(img.rgb, background, img.alpha)
     rgb, alpha, fill = fit_square(img, size, background=bg, fit=fit)
     mask, source = _mask_in_frame(
         rgb, alpha, fill, img.size, img.path, mask_path, mask_method, max_pixels, max_bytes, fit

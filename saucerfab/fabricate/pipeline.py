@@ -37,7 +37,7 @@ import numpy as np
 
 from saucerfab import __version__
 from saucerfab.design import Design, load_design, reference_name
-from saucerfab.errors import ConfigError, DesignError, ExportError, SaucerfabError
+from saucerfab.errors import ConfigError, DesignError, ExportError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.profiles import DEFAULT_PRINTER, PrinterProfile, load_profile
 
@@ -252,14 +252,11 @@ def surround_rgb(design: Design) -> tuple[int, int, int]:
     for a design that records neither (a synthetic one).
     """
     from saucerfab.fabricate.options import NEUTRAL_WALL_RGB
-    from saucerfab.images import intended_background
+    from saucerfab.images import intended_background, recorded_background
 
     ref = design.references.get("direct")
     picture = None if ref is None else np.asarray(ref, np.float64) / 255.0
-    try:
-        c = intended_background(picture, design.parameters.get("background"))
-    except SaucerfabError:  # an unreadable recorded colour: the neutral, as for a design without one
-        c = None
+    c = intended_background(picture, recorded_background(design.parameters))
     if c is None:
         return NEUTRAL_WALL_RGB
     r, g, b = (int(round(float(v) * 255.0)) for v in np.clip(c, 0.0, 1.0))

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from saucerfab.errors import ConfigError
+from saucerfab.images import recorded_background
 from saucerfab.eyes import EyeSpec, eye_positions, eyes_made_for
 from saucerfab.verify.metrics import best_shift, psnr, ssim
 from saucerfab.verify.printfolder import (
@@ -206,7 +207,8 @@ def verify_print(
     if not all_formats:
         files = files[:1]
     # the eyes the design was made for (an eye box is verified over that box), else the design eye and a viewer's two
-    spec = eyes or eyes_made_for(design_parameters(folder)) or EyeSpec()
+    made = design_parameters(folder)  # export.json's record of the design: its eyes and its background
+    spec = eyes or eyes_made_for(made) or EyeSpec()
     all_eyes = eye_positions(spec, scene.camera, scene.views["direct"].target)
     jobs = len(all_eyes) * (len(views) + 1) + (len(files) - 1) * len(views)
     done = 0
@@ -233,7 +235,7 @@ def verify_print(
         flats: FlatPrints | None = None
         if k == 0:
             whole = WholeViews(tracer, surface, scene, full_refs,
-                               background_colours(full_refs, design_parameters(folder).get("background")), res)
+                               background_colours(full_refs, recorded_background(made)), res)
         design_regions: dict[str, np.ndarray] = {}
         for eye in all_eyes if k == 0 else all_eyes[:1]:
             for view in views:

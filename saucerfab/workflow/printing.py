@@ -86,6 +86,7 @@ def finish_print(
         scratch: where a zipped OBJ is unpacked for its check (default: the system's temp folder).
         on_stage: told each stage of :data:`STAGES` after the export as it starts.
     """
+    from saucerfab.errors import SaucerfabError
     from saucerfab.fileio import write_text_atomic
 
     folder = Path(result.out)
@@ -97,18 +98,16 @@ def finish_print(
             write_text_atomic(folder / "check.json", check_json(folder, done.checks))
     if verify:
         _tell(on_stage, "verify")
-        from saucerfab.errors import SaucerfabError
-
         try:
             done.verify = quick_verify(folder, folder / "verify", record_times=record_times, progress=progress)
-        except SaucerfabError as exc:
+        except (SaucerfabError, OSError) as exc:  # the print files are complete: say why, as a note
             done.notes.append(f"not verified: {exc}")
     _tell(on_stage, "report")
     try:
         from saucerfab.report_page import refresh_export_report
 
         refresh_export_report(folder)
-    except (OSError, ValueError) as exc:  # the print files are complete; say why the page is missing
+    except (SaucerfabError, OSError, ValueError) as exc:  # the print files are complete; say why the page is missing
         done.notes.append(f"report.html not written: {exc}")
     return done
 

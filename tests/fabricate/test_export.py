@@ -770,3 +770,17 @@ def test_walls_and_seat_take_the_background_meant_around_the_direct_picture(desi
     res = export_design(made, tmp_path / "q", printer=ALL_FORMATS, cup_diameter_mm=CUP_MM, formats=["ply"],
                         options=FabOptions(texture_px=ATLAS, wall_rgb=(1, 2, 3)))
     assert json.loads(res.summary_json.read_text())["options"]["wall_rgb"] == [1, 2, 3]
+
+
+def test_a_damaged_recorded_background_falls_back_alike_in_export_and_verify(design: Design) -> None:
+    from saucerfab.fabricate.pipeline import surround_rgb
+    from saucerfab.images import recorded_background
+    from saucerfab.verify.wholeview import background_colours
+
+    cream = np.zeros((32, 32, 3), np.uint8)
+    cream[...] = (250, 240, 220)
+    made = replace(design, references={"direct": cream}, parameters={**design.parameters, "background": "nonsense"})
+    assert recorded_background(made.parameters) is None and recorded_background({"background": "#102030"}) == "#102030"
+    assert surround_rgb(made) == (250, 240, 220)  # the picture's own border colour, not the neutral grey
+    ideal = background_colours({"direct": cream / 255.0}, recorded_background(made.parameters))["direct"]
+    assert tuple(int(round(v * 255)) for v in ideal) == (250, 240, 220)
