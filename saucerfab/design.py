@@ -53,12 +53,19 @@ MAX_TEXTURE_PIXELS = 8192 * 8192
 
 
 class FaceView(IntEnum):
-    """Texturing case of a face (paper, section 3.4.2)."""
+    """Texturing case of a face (paper, section 3.4.2; SURROUND beyond it)."""
 
     NEITHER = 0
     DIRECT = 1
     REFLECTED = 2
     BOTH = 3
+    #: seen by the design eye outside every frame (directly or in the cup): textured with
+    #: that view's background (:mod:`saucerfab.optimize.surround`)
+    SURROUND = 4
+
+
+#: the cases of faces some frame sees (the paper's three): what a conflict share counts
+FRAMED_VIEWS = (FaceView.DIRECT, FaceView.REFLECTED, FaceView.BOTH)
 
 
 @dataclass

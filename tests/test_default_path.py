@@ -93,8 +93,10 @@ def test_a_design_fine_enough_for_thin_crests_is_kept_printable(
     assert pm["crests_can_be_thin"] and pm["projection_calls"] > 0
     assert pm["thin_crest_vertices"] == 0 and pm["thin_wall_crest_vertices"] == 0
     done = export_strict(bureau, tmp_path / "b", capsys, profiles=["bureau", "mimaki_3duj553"])
-    # made for the strictest profile: no export has anything left to blunt
-    assert not any("relief vertices were moved" in w for d in done.values() for w in d["warnings"])
+    # made for the bureau: its export has nothing left to blunt. (The bureau's rules do not imply the
+    # Mimaki's: a crest under 2 mm tall is no wall to the bureau but may be one to the Mimaki's 1.2 mm
+    # wall rule, so the Mimaki's export may move a few vertices; it says so, and checks clean.)
+    assert not any("relief vertices were moved" in w for w in done["bureau"]["warnings"])
     # made for the J55 (feature 0.3 mm, wall 1 mm): the bureau's export (0.5 mm, 2 mm) blunts, and says so
     j55 = design("heart-star", tmp_path / "j55", *fine)
     done = export_strict(j55, tmp_path / "j", capsys, profiles=["j55", "bureau"])

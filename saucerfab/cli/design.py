@@ -146,6 +146,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         f"--eyes' scores. Default {default('eyes')}",
     )
     p.add_argument(
+        "--surround-weight",
+        type=float,
+        metavar="W",
+        help="weight of the whole view around the pictures: the saucer seen outside the direct frame and its "
+        "image in the cup outside the reflected frame aim at each picture's background, so neither picture "
+        "shows as a ghost around the other; 0 scores the frames alone (the paper). Default "
+        f"{default('surround_weight')}",
+    )
+    p.add_argument(
         "--ipd-mm",
         type=float,
         help=f"distance between the viewer's eyes with --eyes both (default {DEFAULT_IPD_MM:g} mm)",

@@ -61,6 +61,11 @@ class FabOptions:
             border colour: :func:`saucerfab.images.intended_background`), so the walls and the cup
             seat a viewer sees beside the picture do not stand out from it;
             :data:`NEUTRAL_WALL_RGB` for a design without references.
+        mirror_rgb: sRGB 8-bit colour of the points of those surfaces the cup shows the design
+            eye (the strip of plate in front of the cup, seen in the mirror under the reflected
+            picture: :mod:`saucerfab.fabricate.sides`); None (the default): the background meant
+            around the reflected picture when ``wall_rgb`` is None too, else ``wall_rgb`` (a
+            colour given for the walls is used for all of them).
         inpaint: ``harmonic`` fills faces no viewer sees (``FaceView.NEITHER``)
             with a smooth (harmonic) continuation of their neighbours'
             colours; ``none`` leaves them at ``wall_rgb``.
@@ -80,6 +85,7 @@ class FabOptions:
     texture_px: int | None = None
     padding_px: int = 8
     wall_rgb: tuple[int, int, int] | None = None
+    mirror_rgb: tuple[int, int, int] | None = None
     inpaint: Literal["harmonic", "none"] = "harmonic"
     obj_zip: bool = False
     name: str = "saucer"
@@ -106,11 +112,14 @@ class FabOptions:
                 )
         if not isinstance(self.padding_px, int) or not 1 <= self.padding_px <= 64:
             raise ConfigError(f"padding_px must be an integer in [1, 64], got {self.padding_px!r}")
-        if self.wall_rgb is not None:
-            rgb = tuple(self.wall_rgb)
-            if len(rgb) != 3 or not all(isinstance(c, int) and 0 <= c <= 255 for c in rgb):
-                raise ConfigError(f"wall_rgb must be three integers in [0, 255], got {self.wall_rgb!r}")
-            object.__setattr__(self, "wall_rgb", rgb)
+        for key in ("wall_rgb", "mirror_rgb"):
+            value = getattr(self, key)
+            if value is not None:
+                rgb = tuple(value)
+                if len(rgb) != 3 or not all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 255
+                                            for c in rgb):
+                    raise ConfigError(f"{key} must be three integers in [0, 255], got {value!r}")
+                object.__setattr__(self, key, rgb)
         if self.inpaint not in ("harmonic", "none"):
             raise ConfigError(f"inpaint must be 'harmonic' or 'none', got {self.inpaint!r}")
         if (
@@ -141,5 +150,6 @@ class FabOptions:
     def to_dict(self) -> dict[str, Any]:
         """Plain data (JSON-ready)."""
         d = asdict(self)
-        d["wall_rgb"] = None if self.wall_rgb is None else list(self.wall_rgb)
+        for key in ("wall_rgb", "mirror_rgb"):
+            d[key] = None if getattr(self, key) is None else list(getattr(self, key))
         return d

@@ -242,19 +242,21 @@ def export_printer(design: Design, printer: str | PrinterProfile | None) -> tupl
         ) from None
 
 
-def surround_rgb(design: Design) -> tuple[int, int, int]:
-    """The walls', base's and cup seat's colour by default: the background meant around the direct picture.
+def surround_rgb(design: Design, view: str = "direct") -> tuple[int, int, int]:
+    """The colour of the surfaces beside a picture by default: the background meant around ``view``'s picture.
 
-    :func:`saucerfab.images.intended_background` of the design's direct
-    reference and its ``--background``: a viewer sees the seat plate and the
-    walls beside the picture, where the design meant its background (issue 43:
-    a grey plate read as stray). :data:`~saucerfab.fabricate.options.NEUTRAL_WALL_RGB`
-    for a design that records neither (a synthetic one).
+    :func:`saucerfab.images.intended_background` of the design's reference of
+    ``view`` and its ``--background``: a viewer sees the seat plate and the
+    walls beside the direct picture (the walls' colour, ``view="direct"``), and
+    the strip of plate the cup shows under the reflected one (``"reflected"``),
+    where the design meant its background (a grey plate read as stray).
+    :data:`~saucerfab.fabricate.options.NEUTRAL_WALL_RGB` for a design that
+    records neither (a synthetic one).
     """
     from saucerfab.fabricate.options import NEUTRAL_WALL_RGB
     from saucerfab.images import intended_background, recorded_background
 
-    ref = design.references.get("direct")
+    ref = design.references.get(view)
     picture = None if ref is None else np.asarray(ref, np.float64) / 255.0
     c = intended_background(picture, recorded_background(design.parameters))
     if c is None:
@@ -349,9 +351,12 @@ def export_design(
             f"texture_px {opts.texture_px} exceeds what {profile.name} accepts ({profile.max_texture_px} px)"
         )
     dsg = _resolve_cup(loaded, cup_diameter_mm)
-    if opts.wall_rgb is None:  # recorded resolved in export.json: the colour the files carry
-        from dataclasses import replace as _replace
+    from dataclasses import replace as _replace
 
+    # recorded resolved in export.json: the colours the files carry
+    if opts.mirror_rgb is None:
+        opts = _replace(opts, mirror_rgb=surround_rgb(dsg, "reflected") if opts.wall_rgb is None else opts.wall_rgb)
+    if opts.wall_rgb is None:
         opts = _replace(opts, wall_rgb=surround_rgb(dsg))
     scene = dsg.scene
     t = step("load", t)
@@ -359,6 +364,7 @@ def export_design(
     from saucerfab.fabricate.atlas import TOP_SHARE, build_uvmap, layout_page
     from saucerfab.fabricate.bake import ATLAS_PNG_LEVEL, bake_page, vertex_colors
     from saucerfab.fabricate.scene_json import scene_json_bytes
+    from saucerfab.fabricate.sides import paint_sides, side_vertex_colours
     from saucerfab.fabricate.solid import build_solid
     from saucerfab.fabricate.textured import TexturedMesh
     from saucerfab.imageio import png_bytes_many
@@ -384,6 +390,9 @@ def export_design(
 
     page, bake_stats = bake_page(dsg, layout, wall_rgb=opts.wall_rgb, inpaint=opts.inpaint)
     vrgb = vertex_colors(solid, uvmap, page, layout, opts.wall_rgb)
+    if opts.mirror_rgb != opts.wall_rgb:  # what the cup shows of the plate: the reflected picture's background
+        paint_sides(page, solid, uvmap, scene, opts.mirror_rgb)
+        side_vertex_colours(vrgb, solid, scene, opts.mirror_rgb)
     t = step("bake", t)
     # split the step for the benchmark's table: top bake, unseen-area fill, the rest (page, vertex colours)
     timings["inpaint"] = bake_stats["inpaint_s"]

@@ -59,7 +59,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from saucerfab.design import FaceView
+from saucerfab.design import FRAMED_VIEWS, FaceView
 
 if TYPE_CHECKING:
     from saucerfab.optimize.prepare import Prepared
@@ -83,7 +83,7 @@ def conflict_share(face_view: np.ndarray) -> float:
         face_view: (F,) :class:`~saucerfab.design.FaceView` per face.
     """
     fv = np.asarray(face_view)
-    seen = int((fv != FaceView.NEITHER).sum())
+    seen = int(np.isin(fv, FRAMED_VIEWS).sum())
     return float((fv == FaceView.BOTH).sum() / max(seen, 1))
 
 
@@ -157,7 +157,7 @@ class BaseShapeCheck:
             ``"overcome"`` (over, and the optimisation brought it under) or ``"cause"`` (still
             over: the base shape is the likely cause of ghosts), with ``hint`` then.
         """
-        seen = sum(int(face_views.get(fv.name.lower(), 0)) for fv in FaceView if fv != FaceView.NEITHER)
+        seen = sum(int(face_views.get(fv.name.lower(), 0)) for fv in FRAMED_VIEWS)
         final = int(face_views.get(FaceView.BOTH.name.lower(), 0)) / max(seen, 1)
         if self.base <= BASE_CONFLICT_LIMIT:
             verdict = "ok"

@@ -82,7 +82,8 @@ def largest_inscribed_square(xy: np.ndarray, cells: int = INSCRIBED_CELLS) -> tu
     return lo + cell * centres[k], best * cell / 2
 
 
-def _refit(cam: Camera, points: np.ndarray, mode: str) -> ViewFrame:
+def refit_frame(cam: Camera, points: np.ndarray, mode: str) -> ViewFrame:
+    """``cam``'s frame re-aimed from the same eye at ``points`` (P, 3): "inscribed", "contain" or "cover" them."""
     eye = np.asarray(cam.eye, np.float64)
     frame_cam = cam
     for _ in range(3):  # the re-aimed axis changes the perspective slightly; iterate
@@ -122,7 +123,7 @@ def fit_frames(
         raise ConfigError(f"frames mode must be one of {', '.join(FITTED_FRAMES)}, got {mode!r}")
     grid = make_grid(scene.saucer)
     h = np.asarray(heights, np.float64).reshape(-1)
-    direct = _refit(Camera.from_scene(scene, "direct"), grid.vertices(h), mode)
+    direct = refit_frame(Camera.from_scene(scene, "direct"), grid.vertices(h), mode)
     pieces = reflect(scene, grid.xy())
 
     def region(facets: list[int] | None) -> np.ndarray:
@@ -138,10 +139,10 @@ def fit_frames(
 
     cam_r = Camera.from_scene(scene, "reflected")
     if groups is None:
-        return replace(scene, direct=direct, reflected=_refit(cam_r, region(None), mode))
+        return replace(scene, direct=direct, reflected=refit_frame(cam_r, region(None), mode))
     return replace(
         scene,
         direct=direct,
-        reflected=_refit(cam_r, region(groups[0]), mode),
-        reflected2=_refit(cam_r, region(groups[1]), mode),
+        reflected=refit_frame(cam_r, region(groups[0]), mode),
+        reflected2=refit_frame(cam_r, region(groups[1]), mode),
     )

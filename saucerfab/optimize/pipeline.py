@@ -332,6 +332,7 @@ class _StageLoop:
 
         from saucerfab.optimize.energies import TERMS, Problem
         from saucerfab.optimize.printable import CrestProjection
+        from saucerfab.optimize.surround import Surround
         from saucerfab.optimize.targets import compatibility
 
         self.request, self.prep, self.rig, self.stages = request, prep, rig, stages
@@ -351,6 +352,8 @@ class _StageLoop:
         # the printer's minimum feature and wall, kept on every iterate (saucerfab.relief)
         self.project = CrestProjection(prep.target, scene, prep.base) if prep.target is not None else None
         self._targets: dict[tuple[str, float], dict[str, Any]] = {}
+        #: the whole view around the frames (saucerfab.optimize.surround); None with surround_weight 0
+        self.surround = Surround(rig, prep, request.background) if request.surround_weight > 0 else None
         self.stage_t0 = time.perf_counter()
 
         # weights from rho (section 3.5) unless given
@@ -455,6 +458,9 @@ class _StageLoop:
         multi = bool(self.eyes)
         if multi:
             self.eye_targets_for(spec.targets, sigma)  # made once, before the solver's clock
+        w_surround, surround = float(self.request.surround_weight), self.surround
+        if surround is not None:
+            surround.targets_for(spec.targets, sigma)  # made once, before the solver's clock
 
         def objective(hh: torch.Tensor, cc: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
             ev = e_visual(rig.render(hh, cc, sigma), targets)
@@ -462,9 +468,15 @@ class _StageLoop:
                 ev = self.e_visual_eyes(spec, ev, hh, cc)
             terms = [(key, w, fn(hh, cc)) for key, fn, w in smooth]
             total = ev
+            around = {}
+            if surround is not None:  # the saucer around the frames, seen directly and in the cup
+                es = surround.energy(hh, cc, spec.targets, sigma)
+                total = total + w_surround * es
+                around = {"E_surround": float(es.detach())}
             for _, w, e in terms:
                 total = total + w * e
-            return total, {"E_visual": float(ev.detach()), **{key: float(e.detach()) for key, _, e in terms}}
+            return total, {"E_visual": float(ev.detach()), **around,
+                           **{key: float(e.detach()) for key, _, e in terms}}
 
         return objective
 
@@ -569,6 +581,7 @@ class _StageLoop:
         prep, rig, metrics, request = self.prep, self.rig, self.metrics, self.request
         t0 = time.perf_counter()
         heights = h.numpy().astype(np.float64).reshape(rig.n, rig.n)
+        surround = self.surround.texture_colours(heights) if self.surround is not None else None
         if self.eyes:
             from saucerfab.optimize.texturing import EyeViews
             from saucerfab.optimize.viewpoints import design_frame_ndc
@@ -578,9 +591,10 @@ class _StageLoop:
                                            for v in e.rig.views})
                 for e in self.eyes[1:]
             ]
-            tex = texture_saucer(rig, heights, prep.texture, eyes=others, design_weight=self.eyes[0].weight)
+            tex = texture_saucer(rig, heights, prep.texture, eyes=others, design_weight=self.eyes[0].weight,
+                                 surround=surround)
         else:
-            tex = texture_saucer(rig, heights, prep.texture)
+            tex = texture_saucer(rig, heights, prep.texture, surround=surround)
         metrics["texturing_s"] = time.perf_counter() - t0
         metrics["face_views"] = {fv.name.lower(): int((tex.face_view == fv).sum()) for fv in FaceView}
         metrics["max_abs_height_change"] = float(np.abs(heights - prep.base).max())
@@ -589,6 +603,8 @@ class _StageLoop:
             if t.in_metrics and t.prox is None:
                 metrics[t.key] = float(fn(h_final, c))
         if prep.target is not None:
+            from saucerfab.optimize.printable import printable_metrics
+
             metrics["printable"] = printable_metrics(prep.target, heights, self.project)
         design = Design(
             scene=prep.scene,
@@ -671,25 +687,3 @@ def _parameters(
     if isinstance(d.get("printer"), str) and d["printer"].lower().endswith(".toml"):
         d["printer"] = Path(d["printer"]).name
     return d
-
-
-def printable_metrics(target: PrintTarget, heights: np.ndarray, project: Any) -> dict[str, Any]:
-    """The final heights against the printer's minimum feature (``metrics.printable`` of design.json)."""
-    from saucerfab.relief import WALL_MARGIN, crest_widths, wall_widths
-
-    dx, dy = target.spacing_mm
-    hmm = np.asarray(heights) * target.mm_per_unit
-    p = target.profile
-    w = crest_widths(hmm, dx, dy, p.min_feature_mm)
-    ww = wall_widths(hmm, dx, dy, p.min_wall_mm)
-    out: dict[str, Any] = {
-        "printer": p.key,
-        "thin_crest_vertices": int((w < p.min_feature_mm).sum()),
-        "narrowest_crest_mm": float(w.min()) if np.isfinite(w).any() else None,
-        "thin_wall_crest_vertices": int((ww < WALL_MARGIN * p.min_wall_mm).sum()),
-        "narrowest_crest_at_min_wall_mm": float(ww.min()) if np.isfinite(ww).any() else None,
-        "crests_can_be_thin": target.crests_can_be_thin,
-    }
-    if project is not None:
-        out.update(project.stats())
-    return out

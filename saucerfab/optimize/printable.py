@@ -251,3 +251,25 @@ class CrestProjection:
             "projection_refused": self.refused,
             "max_projection_move_mm": self.max_change_units * self.target.mm_per_unit,
         }
+
+
+def printable_metrics(target: PrintTarget, heights: np.ndarray, project: Any) -> dict[str, Any]:
+    """The final heights against the printer's minimum feature (``metrics.printable`` of design.json)."""
+    from saucerfab.relief import WALL_MARGIN, crest_widths, wall_widths
+
+    dx, dy = target.spacing_mm
+    hmm = np.asarray(heights) * target.mm_per_unit
+    p = target.profile
+    w = crest_widths(hmm, dx, dy, p.min_feature_mm)
+    ww = wall_widths(hmm, dx, dy, p.min_wall_mm)
+    out: dict[str, Any] = {
+        "printer": p.key,
+        "thin_crest_vertices": int((w < p.min_feature_mm).sum()),
+        "narrowest_crest_mm": float(w.min()) if np.isfinite(w).any() else None,
+        "thin_wall_crest_vertices": int((ww < WALL_MARGIN * p.min_wall_mm).sum()),
+        "narrowest_crest_at_min_wall_mm": float(ww.min()) if np.isfinite(ww).any() else None,
+        "crests_can_be_thin": target.crests_can_be_thin,
+    }
+    if project is not None:
+        out.update(project.stats())
+    return out

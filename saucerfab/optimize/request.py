@@ -37,6 +37,8 @@ FRAMES = ("inscribed", "contain", "cover", "scene")
 PRISM_PLACEMENTS = ("auto", "as_given")
 #: starting face colours (the first is the default)
 COLOR_INITS = ("gray", "projected")
+#: the default weight of the whole view around the frames (DesignRequest.surround_weight)
+SURROUND_WEIGHT = 1.0
 
 #: one keyword-only field per declared weight: a rho weight is None ("automatic") unless given
 _Weights = make_dataclass(
@@ -148,6 +150,11 @@ class DesignRequest(_Weights):
             direct and reflected views (:mod:`saucerfab.optimize.viewpoints`,
             weights :func:`saucerfab.eyes.eye_weights`), and the texturing blends
             what each eye wants. Measured in benchmarks/RESULTS.md (Eyes).
+        surround_weight: the weight of the whole view around the frames
+            (:mod:`saucerfab.optimize.surround`): the saucer seen directly outside the
+            direct frame and the mirror's image of it outside the reflected frame aim at
+            each picture's background, per unit of view area against the frames'
+            E_visual; 0 leaves them out (the paper's energy, the frames alone).
         ipd_mm: the distance between a viewer's eyes with ``eyes="both"`` (None: 64 mm,
             :data:`saucerfab.eyes.DEFAULT_IPD_MM`); refused with the other modes.
     """
@@ -179,6 +186,7 @@ class DesignRequest(_Weights):
     record_times: bool = True
     eyes: str = "design"
     ipd_mm: float | None = None
+    surround_weight: float = SURROUND_WEIGHT
 
     def eye_spec(self) -> EyeSpec:
         """The eyes the design is made for (:attr:`eyes`, :attr:`ipd_mm`), as verify takes them."""
@@ -252,6 +260,9 @@ class DesignRequest(_Weights):
                 f"--eyes {self.eyes} is not supported with a second reflected image (--reflected2) yet; "
                 "give --eyes design"
             )
+        v = self.surround_weight
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            raise ConfigError(f"surround_weight must be a non-negative number (0: the frames alone), got {v!r}")
         v = self.max_iters
         if v is not None and (isinstance(v, bool) or not isinstance(v, int)):
             raise ConfigError(f"max_iters must be a whole number of iterations per stage, got {v!r}")

@@ -5,13 +5,16 @@ in the reflection only, in both, or in neither (:class:`FaceView`). Its
 texture coordinates are its corners' projections into the image of the view
 it is seen in. The texture is the input images side by side::
 
-    +-----------+-----------+-------------+
-    |  direct   | reflected | reflected2  |    each panel T x T, the view's whole frame
-    +-----------+-----------+-------------+
+    +-----------+-----------+-------------+-----------+
+    |  direct   | reflected | reflected2  | surround  |    each panel T x T, the view's whole frame
+    +-----------+-----------+-------------+-----------+
 
 A face seen in both views takes its reflected-image coordinates, and the
 reflected panel's texels under it become the average of the two images'
-colours there (the paper's rule). Faces seen in neither keep their
+colours there (the paper's rule). Faces no frame sees but the
+design eye sees around them (:mod:`saucerfab.optimize.surround`) take the
+background of the view they are seen in, from the last panel (stripes of
+those colours; FaceView.SURROUND). Faces seen in neither keep their
 direct-view projection (clamped to the panel); the fabrication bake gives
 them a smooth continuation of their neighbours' colours.
 
@@ -35,9 +38,10 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.design import FaceView
+from saucerfab.design import FRAMED_VIEWS, FaceView
 from saucerfab.optimize.targets import sample_bilinear
 from saucerfab.optimize.views import Rig, visible_faces
+from saucerfab.render.texels import raster_triangles_2d
 
 
 @dataclass
@@ -94,52 +98,6 @@ def classify_faces(visible: dict[str, np.ndarray]) -> np.ndarray:
     return out
 
 
-def raster_triangles_2d(
-    tri: np.ndarray, width: int, height: int, chunk: int = 4096
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Texel centres inside 2-D triangles.
-
-    Args:
-        tri: (M, 3, 2) triangle corners in continuous pixel coordinates
-            ``(column, row)``; texel (i, j)'s centre is (j + 0.5, i + 0.5).
-        width, height: image size; texels outside are skipped.
-    Returns:
-        ``(rows, cols, tri_index, bary)``-style triple ``(flat_pixel (K,),
-        tri_index (K,), bary (K, 3))``; a texel on a shared edge may be
-        reported for both triangles.
-    """
-    pix_all, idx_all, bary_all = [], [], []
-    for s in range(0, tri.shape[0], chunk):
-        t = tri[s : s + chunk].astype(np.float64)
-        lo = np.floor(t.min(axis=1) - 0.5).astype(np.int64)
-        hi = np.ceil(t.max(axis=1) - 0.5).astype(np.int64)
-        lo = np.clip(lo, 0, [width - 1, height - 1])
-        hi = np.clip(hi, 0, [width - 1, height - 1])
-        span = hi - lo + 1
-        bw, bh = int(span[:, 0].max()), int(span[:, 1].max())
-        ox, oy = np.meshgrid(np.arange(bw), np.arange(bh))
-        px = lo[:, None, 0] + ox.reshape(1, -1)
-        py = lo[:, None, 1] + oy.reshape(1, -1)
-        inside_box = (px <= hi[:, None, 0]) & (py <= hi[:, None, 1])
-        cx, cy = px + 0.5, py + 0.5
-        a, b, c = t[:, 0], t[:, 1], t[:, 2]
-        den = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
-        ok_tri = np.abs(den) > 1e-12
-        den = np.where(ok_tri, den, 1.0)[:, None]
-        w0 = ((b[:, None, 1] - c[:, None, 1]) * (cx - c[:, None, 0]) + (c[:, None, 0] - b[:, None, 0]) * (cy - c[:, None, 1])) / den
-        w1 = ((c[:, None, 1] - a[:, None, 1]) * (cx - c[:, None, 0]) + (a[:, None, 0] - c[:, None, 0]) * (cy - c[:, None, 1])) / den
-        w2 = 1 - w0 - w1
-        eps = -1e-9
-        m = inside_box & ok_tri[:, None] & (w0 >= eps) & (w1 >= eps) & (w2 >= eps)
-        fi, ci = np.nonzero(m)
-        pix_all.append(py[fi, ci] * width + px[fi, ci])
-        idx_all.append(fi + s)
-        bary_all.append(np.stack([w0[fi, ci], w1[fi, ci], w2[fi, ci]], axis=1))
-    if not pix_all:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
-    return np.concatenate(pix_all), np.concatenate(idx_all), np.concatenate(bary_all)
-
-
 def _uv_from_ndc(ndc_xy: np.ndarray, panel: int, panels: int) -> np.ndarray:
     """NDC (..., 2) in a view frame -> atlas UV (u right, v up), clamped to the panel."""
     u = (panel + np.clip((ndc_xy[..., 0] + 1) / 2, 0, 1)) / panels
@@ -155,6 +113,7 @@ def texture_saucer(
     supersample: int = 2,
     eyes: list[EyeViews] | None = None,
     design_weight: float = 1.0,
+    surround: list[tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> TextureResult:
     """Texture the saucer with the input images (section 3.4.2).
 
@@ -164,9 +123,15 @@ def texture_saucer(
             view's frame (all the same T; may exceed the render size).
         eyes: the other eyes the design is made for (none: the paper's texturing).
         design_weight: the design eye's weight in the blend with ``eyes``.
+        surround: the faces seen outside every frame, as (faces (F,) bool,
+            colour (3,) in [0, 1]) pairs (:func:`saucerfab.optimize.surround.surround_faces`
+            with each view's background): a face no frame sees takes its pair's
+            colour (FaceView.SURROUND), from one more panel of the texture holding
+            the colours side by side as stripes.
     """
     names = [v.name for v in rig.views]
-    k = len(names)
+    surround = [(np.asarray(m, bool), np.asarray(col, np.float64)) for m, col in (surround or [])]
+    k = len(names) + (1 if surround else 0)
     t = images["direct"].shape[0]
     h = np.asarray(heights, np.float64).reshape(-1)
     visible = visible_faces(rig, heights, supersample)
@@ -208,7 +173,9 @@ def texture_saucer(
             acc = np.stack([np.bincount(pix, weights=col_d[:, c], minlength=t * t) for c in range(3)], 1)
             hit = cnt > 0
             flat[hit] = 0.5 * (flat[hit] + acc[hit] / cnt[hit, None])
-    if eyes:
+    if surround:  # the last panel, before the eyes' blend: its UVs are in k panels' units
+        panels.append(_surround_panel(surround, face_uvs, face_panel, face_view, t, k))
+    if eyes:  # (the surround's faces are not the frames': the blend leaves them)
         _blend_eyes(panels, face_uvs, face_panel, face_view, h, images, eyes, design_weight)
     # panel by panel, in place: the same values as clip(rint(concatenate(panels) * 255))
     # without three atlas-sized float64 temporaries (about 0.4 s of page faults at T = 1024)
@@ -219,6 +186,32 @@ def texture_saucer(
         np.clip(panel, 0, 255, out=panel)
         texture8[:, p * t:(p + 1) * t] = panel
     return TextureResult(texture8, face_uvs.astype(np.float32), face_view, face_panel)
+
+
+def _surround_panel(
+    surround: list[tuple[np.ndarray, np.ndarray]],
+    face_uvs: np.ndarray,
+    face_panel: np.ndarray,
+    face_view: np.ndarray,
+    t: int,
+    k: int,
+) -> np.ndarray:
+    """The last panel (T, T, 3) float64: one stripe of each surround colour; its faces pointed at their stripe's centre (in place).
+
+    A face is marked SURROUND only where no frame sees it (``face_view`` NEITHER):
+    the frames' texturing is never overridden.
+    """
+    panel = np.empty((t, t, 3), np.float64)
+    p = k - 1
+    n = len(surround)
+    for i, (faces, colour) in enumerate(surround):
+        lo, hi = (i * t) // n, ((i + 1) * t) // n
+        panel[:, lo:hi] = np.clip(colour, 0.0, 1.0)
+        mine = np.asarray(faces, bool) & (face_view == FaceView.NEITHER)
+        face_uvs[mine] = ((p + (lo + hi) / 2 / t) / k, 0.5)  # every corner at the stripe's centre
+        face_panel[mine] = p
+        face_view[mine] = FaceView.SURROUND
+    return panel
 
 
 def _blend_eyes(
@@ -245,7 +238,7 @@ def _blend_eyes(
             inv[fsrc] = np.arange(fsrc.shape[0])
             seen_by.append((eye.weight, view, eye.coords[view.name], vis[view.name], inv))
     for p in range(k):
-        on_p = np.flatnonzero((face_panel == p) & (face_view != FaceView.NEITHER))
+        on_p = np.flatnonzero((face_panel == p) & np.isin(face_view, FRAMED_VIEWS))
         if not on_p.size:
             continue
         uv = face_uvs[on_p].astype(np.float64)

@@ -165,7 +165,7 @@ class ViewMeshes:
                     mirror=np.concatenate(mirror),
                 )
             )
-        self.views = [self._finish(v) for v in self.views]
+        self.views = [self.as_view(v) for v in self.views]
         #: supersample -> (heights (V,), visibility) of the last :meth:`visible_faces` call
         self._visible_memo: dict[int, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
 
@@ -196,7 +196,7 @@ class ViewMeshes:
         self._visible_memo[supersample] = (h.copy(), {name: vis.copy() for name, vis in out.items()})
         return out
 
-    def _finish(self, mesh: ViewMesh) -> Any:
+    def as_view(self, mesh: ViewMesh) -> Any:
         """A view as this class keeps it (numpy here; :class:`Rig`: torch tensors)."""
         return mesh
 
@@ -216,7 +216,7 @@ class Rig(ViewMeshes):
 
     views: list[View]
 
-    def _finish(self, mesh: ViewMesh) -> View:
+    def as_view(self, mesh: ViewMesh) -> View:
         import torch
 
         return View(mesh.name, mesh.camera, torch.as_tensor(mesh.xy), torch.as_tensor(mesh.vert_src),

@@ -9,7 +9,8 @@
   and vectorized torch (:mod:`saucerfab.render.soft_torch`, also the CUDA path).
 * :func:`rasterize_hard`, :func:`render_textured`, :func:`render_face_colors_hard` -
   nearest-face rasterization for previews and visibility (:mod:`saucerfab.render.hard`);
-  the bilinear texture lookup they and the bake share (:mod:`saucerfab.render.sampling`).
+  the bilinear texture lookup they and the bake share (:mod:`saucerfab.render.sampling`);
+  the texels under 2-D triangles the texturing and the export's paint share (:mod:`saucerfab.render.texels`).
 
 Only the camera is imported with the package; the rasterizers (and numba,
 torch) load on first use, so ``from saucerfab.render.camera import Camera``

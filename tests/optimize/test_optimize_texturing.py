@@ -7,9 +7,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from saucerfab.design import FaceView
+from saucerfab.design import FRAMED_VIEWS, FaceView
 from saucerfab.heightfield import base_shape
-from saucerfab.optimize.texturing import classify_faces, raster_triangles_2d, texture_saucer
+from saucerfab.optimize.texturing import classify_faces, texture_saucer
+from saucerfab.render.texels import raster_triangles_2d
 from saucerfab.optimize.views import Rig
 from saucerfab.scene import Scene
 
@@ -55,8 +56,9 @@ def test_four_cases_uvs_and_both_average(small_rig) -> None:  # noqa: ANN001
     blue[..., 2] = 1.0
     res = texture_saucer(rig, base, {"direct": red, "reflected": blue})
     fv = res.face_view
-    for case in FaceView:
+    for case in (FaceView.NEITHER, *FRAMED_VIEWS):
         assert (fv == case).any(), f"no face in case {case.name}: the scene should produce all four"
+    assert not (fv == FaceView.SURROUND).any()  # only with surround colours given
     assert res.texture.shape == (t, 2 * t, 3)
     u = res.face_uvs[..., 0]
     # direct-only (and neither) faces sample the left panel, reflected and both the right

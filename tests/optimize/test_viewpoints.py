@@ -168,7 +168,8 @@ def test_the_multi_eye_energy_is_the_weighted_sum_of_single_eye_energies() -> No
 
 def test_the_texture_blend_keeps_what_every_eye_agrees_on() -> None:
     """A flat saucer: every eye wants the same texel colours on faces seen directly, so the blend keeps them."""
-    from saucerfab.optimize.texturing import EyeViews, raster_triangles_2d, texture_saucer
+    from saucerfab.optimize.texturing import EyeViews, texture_saucer
+    from saucerfab.render.texels import raster_triangles_2d
     from saucerfab.optimize.views import Rig, visible_faces
 
     scene, _ = _small(n=24, size=32)

@@ -1,0 +1,129 @@
+"""The whole piece as the viewer sees it, before and after: every bundled pair, old code against this checkout.
+
+    .venv/bin/python benchmarks/bench_whole.py --old 5de9582                       # every bundled pair
+    .venv/bin/python benchmarks/bench_whole.py --old 5de9582 --pairs heart-star --pictures benchmarks/results/whole
+    .venv/bin/python benchmarks/bench_whole.py --old HEAD --arm frames-only='--surround-weight 0'
+
+For each pair, ``saucerfab design`` exactly as a user types it (defaults, no
+quick verify) and ``saucerfab export --printer j55 --cup-diameter-mm 80
+--formats obj`` by the old code (``--old``: a git revision, copied with ``git
+archive``, its numba kernels compiled before the clock starts) and by this
+checkout (and each ``--arm``), in alternating order; then *this* checkout's
+``saucerfab verify`` (the same instrument for every arm) at 256 px, 16 spp
+from the design eye and a viewer's two eyes. Per pair and arm it prints the
+design's wall and CPU seconds, each frame's PSNR (design eye against the
+picture; moved eyes against the flat print), and the design eye's whole
+view: its PSNR against the ideal whole view, the stray share of the saucer
+around the direct frame and of the mirror around the reflected frame, and
+the reflected picture's share of the cup's width (:mod:`saucerfab.verify.wholeview`).
+
+``--pictures DIR`` keeps each arm's ``design_whole.png`` there as
+``<pair>_<arm>_whole.png``. Times are wall-clock on a shared machine: the
+ratio within a pair is the figure (see ``bench_speed.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_design import machine  # noqa: E402
+from bench_speed import _env, _load, design, old_copy  # noqa: E402
+
+from saucerfab.samples import PAIRS  # noqa: E402
+from saucerfab.verify import EyeSpec, verify_print  # noqa: E402
+
+EYES = ("design", "left", "right")
+
+
+def export(code: Path, design_dir: Path, print_dir: Path) -> None:
+    """``saucerfab export`` of ``design_dir`` by the code in ``code`` (J55, OBJ, 80 mm cup; no check, no verify)."""
+    subprocess.run([sys.executable, "-m", "saucerfab", "export", str(design_dir), "--printer", "j55",
+                    "--cup-diameter-mm", "80", "--formats", "obj", "--out", str(print_dir), "--quiet",
+                    "--no-verify", "--no-check"], cwd=code, env=_env(code), check=True, capture_output=True)
+
+
+def scores(print_dir: Path, pictures: Path | None) -> dict:
+    """This checkout's verify of ``print_dir`` from three eyes: frames' PSNR and the design eye's whole view."""
+    res = verify_print(print_dir, eyes=EyeSpec("both"), res=256, spp=16, all_formats=False,
+                       pictures_dir=pictures)
+    out = {f"{v.view}/{v.eye}": v.psnr_db for v in res.files[0].views}
+    whole = next(w for w in res.whole_views if w.eye == "design")
+    out.update(whole_db=whole.psnr_db, stray_direct=whole.stray_direct, stray_reflected=whole.stray_reflected,
+               width_share=whole.width_share)
+    return out
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--old", required=True, help="git revision of the code before the change")
+    p.add_argument("--pairs", default="all", help=f"comma-separated or all: {', '.join(PAIRS)}")
+    p.add_argument("--arm", action="append", default=[], metavar="LABEL=OPTIONS",
+                   help="one more configuration of this checkout, e.g. frames-only='--surround-weight 0'")
+    p.add_argument("--pictures", type=Path, help="keep each arm's whole-view picture here")
+    p.add_argument("--json", help="also write the rows as JSON here")
+    args = p.parse_args()
+    pairs = list(PAIRS) if args.pairs == "all" else args.pairs.split(",")
+    unknown = [x for x in pairs if x not in PAIRS]
+    if unknown:
+        p.error(f"unknown pairs {unknown}; known: {', '.join(PAIRS)}")
+    print(f"machine: {machine()}; old = {args.old}, new = this checkout; start load {_load()}", flush=True)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp_s:
+        tmp = Path(tmp_s)
+        old = old_copy(args.old, tmp / "old")
+        subprocess.run([sys.executable, "-m", "saucerfab.warmup"], cwd=ROOT, env=_env(ROOT), check=True,
+                       capture_output=True)
+        arms = [("old", old, []), ("new", ROOT, [])]
+        arms += [(a.split("=", 1)[0], ROOT, shlex.split(a.split("=", 1)[1])) for a in args.arm]
+        for k, pair in enumerate(pairs):
+            row: dict = {"pair": pair}
+            for label, code, extra in arms[k % len(arms):] + arms[:k % len(arms)]:  # each arm first in turn
+                out = tmp / pair / label
+                d = design(code, pair, out / "design", ["--no-verify", *extra])
+                export(code, out / "design", out / "print")
+                pics = out / "verify" if args.pictures else None
+                d.update(scores(out / "print", pics), load=_load())
+                if args.pictures:
+                    args.pictures.mkdir(parents=True, exist_ok=True)
+                    shutil.copyfile(pics / "design_whole.png", args.pictures / f"{pair}_{label}_whole.png")
+                row[label] = d
+                print(f"{pair} {label}: {d['seconds']:.1f} s (CPU {d['cpu_s']:.1f} s, load {d['load']}); whole "
+                      f"{d['whole_db']:.1f} dB, stray {d['stray_direct']:.1%} / {d['stray_reflected']:.1%}, "
+                      f"width {d['width_share']:.0%}", flush=True)
+            rows.append(row)
+    labels = [a[0] for a in arms]
+    print("\n| pair | code | design s (CPU s) | frames, design eye dB: direct / reflected | moved eyes dB "
+          "(left, right): direct / reflected | whole view dB | stray: saucer / mirror | reflected picture's "
+          "width |")
+    print("|---|---|---:|---|---|---:|---|---:|")
+    for r in rows:
+        for label in labels:
+            d = r[label]
+            moved = " / ".join(f"{d[f'{v}/left']:.1f}, {d[f'{v}/right']:.1f}" for v in ("direct", "reflected"))
+            print(f"| {r['pair']} | {label} | {d['seconds']:.1f} ({d['cpu_s']:.1f}) | {d['direct/design']:.1f} / "
+                  f"{d['reflected/design']:.1f} | {moved} | {d['whole_db']:.1f} | {d['stray_direct']:.1%} / "
+                  f"{d['stray_reflected']:.1%} | {d['width_share']:.0%} |")
+    for label in labels[1:]:
+        t_old = sum(r["old"]["seconds"] for r in rows)
+        t_new = sum(r[label]["seconds"] for r in rows)
+        c_old = sum(r["old"]["cpu_s"] for r in rows)
+        c_new = sum(r[label]["cpu_s"] for r in rows)
+        print(f"\n{label} / old, all pairs: design wall {t_new / t_old:.2f}x, CPU {c_new / c_old:.2f}x")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"old": args.old, "machine": machine(), "rows": rows}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
