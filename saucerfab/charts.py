@@ -28,10 +28,11 @@ from saucerfab.colormaps import colormap
 SUPERSAMPLE = 2
 
 #: energy series drawn by :func:`energy_plot`, with their colours (matplotlib's
-#: black, tab:blue, tab:orange, tab:green)
+#: black, tab:blue, tab:purple, tab:orange, tab:green)
 ENERGY_KEYS: tuple[tuple[str, tuple[int, int, int]], ...] = (
     ("E_total", (0, 0, 0)),
     ("E_visual", (31, 119, 180)),
+    ("E_surround", (148, 103, 189)),
     ("E_deform", (255, 127, 14)),
     ("E_sparse", (44, 160, 44)),
 )

@@ -53,6 +53,8 @@ STAGE_LABELS: dict[str, str] = {
 ENERGY_LABELS: dict[str, str] = {
     "E_visual": "image error",  # squared colour difference to the targets, summed over the views (eq. 2/7)
     "E_visual_eyes": "image error over the eyes",
+    # the whole view's squared colour difference outside the frames (saucerfab.optimize.surround)
+    "E_surround": "image error around the pictures",
     "E_deform": "shape change",  # how far the relief's Laplacian moved from the base shape's (eq. 3)
     "E_sparse": "heights moved",  # sum |h - h_start| of the sparse stage (eq. 9)
     "E_barrier": "bound barrier (keeps heights within the relief bound)",  # eq. 4-5

@@ -541,6 +541,8 @@ class _StageLoop:
             ev_t = e_visual(rig.render(h, c, spec.sigma), target_list)
             ev = float(ev_t)
             eyes_part = {"E_visual_eyes": float(self.e_visual_eyes(spec, ev_t, h, c))} if self.eyes else {}
+            if self.surround is not None:
+                eyes_part["E_surround"] = float(self.surround.energy(h, c, spec.targets, spec.sigma))
         reported: dict[str, float | None] = {}
         for t, fn in self.energies:
             if t.in_metrics and t.prox is None:
