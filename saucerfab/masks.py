@@ -8,7 +8,7 @@ automatic colour-distance threshold against the plain background.
 :func:`plain_background_share` says whether a threshold mask can be trusted.
 
 :func:`prepare_image` loads a picture (:func:`saucerfab.images.load_image`),
-fits it into its view frame (:func:`saucerfab.images.fit_square`) and masks
+fits it into its view frame (:func:`saucerfab.fitting.fit_square`) and masks
 it there, giving the :class:`~saucerfab.images.ViewImage` the optimizer uses.
 """
 
@@ -23,17 +23,15 @@ import numpy as np
 
 from saucerfab.errors import ConfigError, ImageError, MaskError
 from saucerfab.fileio import sha256_file
+from saucerfab.fitting import FITS, fit_plane, fit_square
 from saucerfab.images import (
     DEFAULT_MAX_BYTES,
     DEFAULT_MAX_PIXELS,
-    FITS,
     LoadedImage,
     ViewImage,
     border_ring,
     estimate_background,
     intended_background,
-    fit_plane,
-    fit_square,
     flatten_alpha,
     load_image,
 )

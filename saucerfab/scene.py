@@ -10,7 +10,8 @@ A *view frame* is what one image covers: a look-at camera from
 ``Scene.camera`` towards ``ViewFrame.target`` with z up, and SoftRas's
 perspective, where ``viewing_angle_deg`` is the half field of view:
 ``tan(viewing_angle) = half the frame's width / depth along the view axis``.
-Each input image covers its whole (square) view frame.
+Each input picture keeps its aspect: it covers a centred rectangle of its
+square view frame (``ViewFrame.extent``), the rest is its background.
 
 The cup shapes are in :mod:`saucerfab.cups` (re-exported here).
 
@@ -44,6 +45,10 @@ MIN_GRID, MAX_GRID = 4, 1024
 MIN_VIEW_TILT = 1e-9
 #: the views a scene can have, in order: each has a frame, an input picture and a rendered image
 VIEW_NAMES = ("direct", "reflected", "reflected2")
+#: a view's extent when its picture fills the whole square (a square picture; files without extents)
+FULL_EXTENT = (1.0, 1.0)
+#: how close to 1 the larger side of an extent must be (written values are rounded)
+EXTENT_TOLERANCE = 1e-6
 
 
 # --------------------------------------------------------------------------- views
@@ -58,14 +63,26 @@ class ViewFrame:
         viewing_angle_deg: SoftRas's ``viewing_angle``, the half field of view
             in degrees: tan(angle) = half frame width / depth along the axis.
         image_size: rendered image width = height, pixels.
+        extent: (ex, ey) the picture's half width and half height in the view's NDC: the
+            picture covers ``|x_ndc| <= ex``, ``|y_ndc| <= ey`` of the square view, centred
+            (each in (0, 1], the larger 1: a 2:1 picture has (1, 0.5)); the rest of the
+            square is the picture's background (:func:`saucerfab.fitting.fit_square` pads it so).
     """
 
     target: Vec3
     viewing_angle_deg: float
     image_size: int = 512
+    extent: Vec2 = FULL_EXTENT
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "target", as_vector("view target", self.target, 3))
+        ext = as_vector("view extent", self.extent, 2)
+        if not all(0.0 < e <= 1.0 for e in ext) or abs(max(ext) - 1.0) > EXTENT_TOLERANCE:
+            raise ConfigError(
+                f"a view's extent is the picture's half width and half height in the square view, each in "
+                f"(0, 1] and the larger 1 (a 2:1 picture: [1.0, 0.5]); got {list(ext)}"
+            )
+        object.__setattr__(self, "extent", tuple(1.0 if e >= 1.0 - EXTENT_TOLERANCE else e for e in ext))
         check_positive("viewing_angle_deg", self.viewing_angle_deg)
         if self.viewing_angle_deg >= 89.0:
             raise ConfigError(
@@ -230,6 +247,7 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
             "target": list(v.target),
             "viewing_angle_deg": v.viewing_angle_deg,
             "image_size": v.image_size,
+            "extent": list(v.extent),
         }
 
     s = scene.saucer
@@ -277,7 +295,7 @@ def scene_from_dict(d: dict[str, Any], base: Scene | None = None) -> Scene:
                 v = d[name]
                 if not isinstance(v, dict):
                     raise ConfigError(f"[{name}] must be a table, got {v!r}")
-                check_keys(f"[{name}]", v, {"target", "viewing_angle_deg", "image_size"})
+                check_keys(f"[{name}]", v, {"target", "viewing_angle_deg", "image_size", "extent"})
                 start = getattr(base, name) or base.reflected
                 kw[name] = replace(start, **v)
         if "saucer" in d:

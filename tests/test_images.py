@@ -17,12 +17,11 @@ from saucerfab.images import (
     LoadedImage,
     ViewImage,
     estimate_background,
-    fit_box,
-    fit_square,
     flatten_alpha,
     load_image,
     parse_colour,
 )
+from saucerfab.fitting import fit_box, fit_square
 from saucerfab.masks import foreground_mask, otsu_threshold, prepare_image, threshold_mask
 
 SAMPLES = Path(__file__).resolve().parent.parent / "samples"
@@ -629,20 +628,28 @@ def test_samples_have_clear_subjects(name):
 # --------------------------------------------------------------------------- fit rules (issue 14)
 
 
-def test_crop_fills_the_frame_and_cuts_the_long_side_equally():
-    from saucerfab.images import fit_box, fit_square
+def test_crop_cuts_the_picture_to_its_content_and_pads_the_rest():
+    from saucerfab.fitting import CONTENT_MARGIN, content_box, fit_box, fit_square
 
     assert fit_box(640, 400, 100, 100, "pad") == (0, 19, 100, 62)
-    x0, y0, w, h = fit_box(640, 400, 100, 100, "crop")
-    assert (y0, h) == (0, 100) and w == 160 and x0 == -30  # 30 px cut on each side
-    # a wide image whose left and right halves differ: crop keeps the middle, pads nothing
-    img = np.zeros((40, 80, 3), np.float32)
-    img[:, 40:] = 1.0
-    rgb, alpha, fill = fit_square(img, 40, fit="crop", background="#00ff00")
-    assert not fill.any() and alpha is None
-    assert np.allclose(rgb[:, :15], 0.0, atol=0.02) and np.allclose(rgb[:, 25:], 1.0, atol=0.02)
-    rgb, _, fill = fit_square(img, 40, fit="pad", background="#00ff00")
-    assert fill[:10].all() and np.allclose(rgb[0, 0], [0, 1, 0])  # the band has the background colour
+    assert fit_box(640, 400, 100, 100, "crop") == fit_box(640, 400, 100, 100, "pad")  # cut first, then as pad
+    # a word on a wide white canvas: crop keeps every letter and drops the empty canvas
+    img = np.ones((60, 200, 3), np.float32)
+    img[20:40, 50:150] = 0.0  # the "word": 100 x 20 px
+    box = content_box(img, None, np.ones(3))
+    m = int(np.ceil(CONTENT_MARGIN * 100))
+    assert box == (50 - m, 20 - m, 150 + m, 40 + m)
+    rgb, alpha, fill = fit_square(img, 52, fit="crop")
+    assert alpha is None
+    ink = rgb.mean(axis=-1) < 0.5
+    cols, rows = np.flatnonzero(ink.any(axis=0)), np.flatnonzero(ink.any(axis=1))
+    # the word spans the frame's width (its margin aside) and keeps its 5:1 shape
+    assert cols[0] <= 2 and cols[-1] >= 49
+    assert (cols[-1] - cols[0] + 1) / (rows[-1] - rows[0] + 1) == pytest.approx(5.0, rel=0.15)
+    assert fill[:15].all() and fill[-15:].all()  # bands of the background above and below
+    # nothing on the canvas: a clear error naming the fix
+    with pytest.raises(Exception, match="no content to crop to.*--fit pad"):
+        fit_square(np.ones((20, 30, 3), np.float32), 16, fit="crop")
     with pytest.raises(Exception, match="fit must be"):
         fit_box(10, 10, 5, 5, "stretch")
 
@@ -657,8 +664,10 @@ def test_design_fit_and_background_options(tmp_path):
     pad = prepare(DesignRequest(samples / "fish_wide.jpg", samples / "reflected_star.png", **base))
     crop = prepare(DesignRequest(samples / "fish_wide.jpg", samples / "reflected_star.png", fit="direct=crop", **base))
     white = prepare(DesignRequest(samples / "fish_wide.jpg", samples / "reflected_star.png", background="#ffffff", **base))
-    # crop scales the 640 x 400 fish by 64/400 instead of 64/640: its subject covers ~2.6x the pixels
-    assert crop.masks["direct"].sum() > 1.8 * pad.masks["direct"].sum()
+    # the fish on its plain ground: crop cuts the empty margins, so the fish fills more of its frame
+    assert crop.masks["direct"].sum() > 1.15 * pad.masks["direct"].sum()
+    assert pad.scene.direct.extent == pytest.approx((1.0, 400 / 640))  # the whole 640 x 400 photograph
+    assert crop.scene.direct.extent != pad.scene.direct.extent  # the frame takes the content's shape
     assert crop.masks["reflected"].sum() == pad.masks["reflected"].sum()  # the rule was for direct only
     assert np.allclose(white.render["direct"][0, 0], 1.0)
     # the star's transparent background shows the colour asked for

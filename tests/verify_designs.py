@@ -23,7 +23,8 @@ SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 
 def picture(name: str, size: int) -> np.ndarray:
     """A bundled sample fitted into a square of ``size`` px, transparency over white, float in [0, 1]."""
-    from saucerfab.images import fit_square, flatten_alpha, load_image
+    from saucerfab.fitting import fit_square
+    from saucerfab.images import flatten_alpha, load_image
 
     img = load_image(SAMPLES / name)
     rgb, alpha, _ = fit_square(img, size)

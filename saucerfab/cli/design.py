@@ -119,9 +119,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--fit",
         metavar="RULE",
-        help="how each picture fills its square frame: pad (the whole picture, bands of --background beside a "
-        "non-square one) or crop (the frame filled, the long side's margins cut off, as for "
-        "photos); or per picture, e.g. direct=crop,reflected=pad. Default " + str(default("fit")),
+        help="what of each picture its frame shows, at that part's own aspect (a wide picture gets a wide "
+        "frame): pad (the whole picture) or crop (cut to its content, the box of what differs from its "
+        "background: a word keeps all its letters and loses the empty canvas); or per picture, e.g. "
+        "direct=crop,reflected=pad. Default " + str(default("fit")),
     )
     p.add_argument(
         "--background",

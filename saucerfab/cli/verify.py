@@ -64,7 +64,7 @@ def view_line(v) -> str:  # type: ignore[no-untyped-def]
     """One view's score for the quick verifies of ``design`` and ``export``: view, eye, dB, coverage, verdict."""
     psnr = "  -- " if v.psnr_db != v.psnr_db else f"{v.psnr_db:4.1f}"
     against = "" if v.reference == "picture" else " (against the flat print)"
-    return (f"{v.view:10s} from the {v.eye:6s} eye  {psnr} dB, {v.coverage * 100:3.0f}% of the frame"
+    return (f"{v.view:10s} from the {v.eye:6s} eye  {psnr} dB, {v.coverage * 100:3.0f}% of the picture"
             f"{'' if v.passed else '  LOW'}{against}")
 
 

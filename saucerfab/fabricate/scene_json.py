@@ -6,7 +6,8 @@ the same numbers in metres)::
 
     {"schema": "saucerfab.scene/1", "units": "mm",
      "camera": {"position": [x, y, z], "up": [0, 0, 1]},
-     "views": {"direct":    {"target": [x, y, z], "viewing_angle_deg": a, "width": w, "height": h},
+     "views": {"direct":    {"target": [x, y, z], "viewing_angle_deg": a, "width": w, "height": h,
+                            "extent": [ex, ey]},
                "reflected": {...}},
      "cup": {"shape": "circle", "center": [x, y], "bottom_z": z, "height": h, "radius": r}
             | {"shape": "ellipse", ..., "semi_axes": [a, b], "rotation_deg": t}
@@ -16,7 +17,10 @@ the same numbers in metres)::
 
 ``viewing_angle_deg`` is SoftRas's: tan(angle) = half the frame's width /
 depth along the view axis; ``width`` and ``height`` are the view image's
-size in pixels (each input image covers its whole, square frame). The
+size in pixels; ``extent`` ``[ex, ey]`` is where the picture lies in the
+square view: ``|x_ndc| <= ex``, ``|y_ndc| <= ey`` (the larger 1; a 2:1 picture
+``[1, 0.5]``; missing in older files: ``[1, 1]``), the rest of the square
+being its background. The
 model-to-file map is a uniform scale (mm per model unit) and a translation
 into the positive octant, so angles and the up vector are unchanged.
 
@@ -76,6 +80,7 @@ def viewing_dict(scene: Scene, model_to_file: np.ndarray) -> dict[str, Any]:
             "viewing_angle_deg": float(v.viewing_angle_deg),
             "width": int(v.image_size),
             "height": int(v.image_size),
+            "extent": [float(e) for e in v.extent],
         }
 
     return {

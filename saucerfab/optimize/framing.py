@@ -6,15 +6,21 @@ reflection fills only about half of the reflected frame's width, so parts of
 the input images fall where no saucer can show them. ``fit_frames`` keeps the
 camera and re-aims each frame at the region the saucer covers in it:
 
-* ``"contain"``: the largest square frame inside the region's bounding box,
+Each frame holds its picture at the picture's own aspect (a wide word gets a
+wide frame): a rectangle of that aspect, centred in the square view, whose
+``extent`` the scene records (:class:`saucerfab.scene.ViewFrame`); the rest of
+the square is the picture's background.
+
+* ``"contain"``: the largest such rectangle inside the region's bounding box,
   so the whole input image lands on the saucer (or its reflection);
-* ``"cover"``: the smallest square frame containing the region, so the whole
+* ``"cover"``: the smallest one containing the region, so the whole
   saucer is used and the image's margins fall off it;
-* ``"inscribed"``: the largest square frame inside the region itself (not its
+* ``"inscribed"``: the largest one inside the region itself (not its
   bounding box): the saucer's reflection in a round cup is a curved
   trapezoid, so ``contain`` leaves the frame's corners off it (verify: 72 %
   of the reflected frame covered) while this frame lies wholly on it, at the
-  price of a smaller picture.
+  price of a smaller picture. The mirror's image of the saucer is a wide,
+  short band, so a wide picture is shown much wider than a square one.
 
 ``"inscribed"`` is the default of a design (``DesignRequest.frames``):
 measured with ``saucerfab verify`` it shows each whole picture (100 % of
@@ -42,6 +48,9 @@ FITTED_FRAMES = tuple(m for m in FRAMES if m != "scene")
 
 #: cells across the region's bounding box when finding the largest square inside it ("inscribed")
 INSCRIBED_CELLS = 160
+#: a picture whose frame has less than this share of the area a square picture's frame gets is
+#: said to fit small (a very wide or tall picture in the mirror's short band)
+SMALL_FIT_SHARE = 0.5
 
 
 def largest_inscribed_square(xy: np.ndarray, cells: int = INSCRIBED_CELLS) -> tuple[np.ndarray, float]:
@@ -82,19 +91,38 @@ def largest_inscribed_square(xy: np.ndarray, cells: int = INSCRIBED_CELLS) -> tu
     return lo + cell * centres[k], best * cell / 2
 
 
-def refit_frame(cam: Camera, points: np.ndarray, mode: str) -> ViewFrame:
-    """``cam``'s frame re-aimed from the same eye at ``points`` (P, 3): "inscribed", "contain" or "cover" them."""
+def largest_inscribed_rectangle(xy: np.ndarray, aspect: float = 1.0,
+                                 cells: int = INSCRIBED_CELLS) -> tuple[np.ndarray, float, float]:
+    """Centre (2,), half width and half height of the largest axis-aligned rectangle of ``aspect``
+    (width over height) inside the region of the points ``xy`` (P, 2).
+
+    The square of :func:`largest_inscribed_square` in coordinates whose x is
+    divided by ``aspect``: a square there is a rectangle of that aspect here.
+    """
+    scaled = np.asarray(xy, np.float64) / np.array([aspect, 1.0])
+    centre, half = largest_inscribed_square(scaled, cells)
+    return centre * np.array([aspect, 1.0]), half * aspect, half
+
+
+def refit_frame(cam: Camera, points: np.ndarray, mode: str, aspect: float = 1.0) -> ViewFrame:
+    """``cam``'s frame re-aimed from the same eye at ``points`` (P, 3): its picture, a rectangle of
+    ``aspect`` (width over height), "inscribed" in the points' region, "contain"-ed in their
+    bounding box or "cover"-ing it; the square view holds the rectangle, its ``extent`` says where."""
     eye = np.asarray(cam.eye, np.float64)
     frame_cam = cam
+    hw = hh = 1.0
     for _ in range(3):  # the re-aimed axis changes the perspective slightly; iterate
         ndc = frame_cam.project(points)
         lo, hi = ndc[:, :2].min(axis=0), ndc[:, :2].max(axis=0)
         if mode == "inscribed":
-            centre, side = largest_inscribed_square(ndc[:, :2])
+            centre, hw, hh = largest_inscribed_rectangle(ndc[:, :2], aspect)
         else:
             centre = (lo + hi) / 2
             half = (hi - lo) / 2
-            side = float(half.min() if mode == "contain" else half.max())
+            # the rectangle of the aspect inside (contain) or around (cover) the bounding box
+            hh = float(min(half[1], half[0] / aspect) if mode == "contain" else max(half[1], half[0] / aspect))
+            hw = aspect * hh
+        side = max(hw, hh)
         r = frame_cam.axes()
         w = frame_cam.tan_angle
         d = r[2] + centre[0] * w * r[0] + centre[1] * w * r[1]
@@ -103,11 +131,14 @@ def refit_frame(cam: Camera, points: np.ndarray, mode: str) -> ViewFrame:
         target = tuple(float(v) for v in eye + d * dist)
         angle = math.degrees(math.atan(w * side))
         frame_cam = Camera(cam.eye, target, angle, cam.image_size)
-    return ViewFrame(frame_cam.target, frame_cam.viewing_angle_deg, cam.image_size)
+    side = max(hw, hh)
+    extent = (min(1.0, hw / side), min(1.0, hh / side))
+    return ViewFrame(frame_cam.target, frame_cam.viewing_angle_deg, cam.image_size, extent)
 
 
 def fit_frames(
-    scene: Scene, heights: np.ndarray, mode: str = "contain", groups: list[list[int]] | None = None
+    scene: Scene, heights: np.ndarray, mode: str = "contain", groups: list[list[int]] | None = None,
+    aspects: dict[str, float] | None = None,
 ) -> Scene:
     """A copy of ``scene`` whose frames are fitted to the saucer and its reflection.
 
@@ -116,14 +147,16 @@ def fit_frames(
         mode: "inscribed", "contain" or "cover" (see the module docstring).
         groups: prism facet groups of two reflected images: the reflected
             frame is fitted to the first group's region, ``reflected2`` to the second.
+        aspects: view name -> its picture's width over height (default 1: a square).
     """
+    aspects = aspects or {}
     from saucerfab.mirror import reflect
 
     if mode not in FITTED_FRAMES:
         raise ConfigError(f"frames mode must be one of {', '.join(FITTED_FRAMES)}, got {mode!r}")
     grid = make_grid(scene.saucer)
     h = np.asarray(heights, np.float64).reshape(-1)
-    direct = refit_frame(Camera.from_scene(scene, "direct"), grid.vertices(h), mode)
+    direct = refit_frame(Camera.from_scene(scene, "direct"), grid.vertices(h), mode, aspects.get("direct", 1.0))
     pieces = reflect(scene, grid.xy())
 
     def region(facets: list[int] | None) -> np.ndarray:
@@ -138,11 +171,41 @@ def fit_frames(
         return allp
 
     cam_r = Camera.from_scene(scene, "reflected")
+    a_r = aspects.get("reflected", 1.0)
     if groups is None:
-        return replace(scene, direct=direct, reflected=refit_frame(cam_r, region(None), mode))
+        return replace(scene, direct=direct, reflected=refit_frame(cam_r, region(None), mode, a_r))
     return replace(
         scene,
         direct=direct,
-        reflected=refit_frame(cam_r, region(groups[0]), mode),
-        reflected2=refit_frame(cam_r, region(groups[1]), mode),
+        reflected=refit_frame(cam_r, region(groups[0]), mode, a_r),
+        reflected2=refit_frame(cam_r, region(groups[1]), mode, aspects.get("reflected2", 1.0)),
     )
+
+
+def frame_area(frame: ViewFrame) -> float:
+    """The picture's area in its view, in squared tangents of the view angle (solid angle, near the axis)."""
+    t = math.tan(math.radians(frame.viewing_angle_deg))
+    return 4.0 * t * t * frame.extent[0] * frame.extent[1]
+
+
+def frame_notes(square: Scene, fitted: Scene, aspects: dict[str, float]) -> list[str]:
+    """What to tell a designer whose picture's shape fits its view small: one line per such view.
+
+    Args:
+        square: the scene with square frames fitted. fitted: with the pictures' aspects.
+        aspects: view name -> the picture's width over height.
+    """
+    out = []
+    for name, aspect in aspects.items():
+        a, b = getattr(square, name, None), getattr(fitted, name, None)
+        if a is None or b is None or abs(aspect - 1.0) < 1e-6:
+            continue
+        share = frame_area(b) / frame_area(a)
+        if share < SMALL_FIT_SHARE:
+            shape = f"{aspect:.1f}:1" if aspect >= 1 else f"1:{1 / aspect:.1f}"
+            out.append(
+                f"the {name} picture is {shape}: the largest frame of that shape where the view sees the saucer "
+                f"has {share:.0%} of the area a square picture's would; it is shown whole at that size "
+                "(a less elongated picture, or --fit crop, shows larger)"
+            )
+    return out

@@ -82,6 +82,7 @@ def build_scene(request: DesignRequest) -> Scene:
 
 def prepare(request: DesignRequest) -> Prepared:
     """Read and validate every input; raise a SaucerfabError before any work."""
+    from saucerfab import fitting
     from saucerfab import images as im
     from saucerfab.heightfield import load_shape
     from saucerfab.masks import PLAIN_SHARE, plain_background_share, prepare_image
@@ -108,35 +109,48 @@ def prepare(request: DesignRequest) -> Prepared:
         else:
             placement = {"placement": "as_given", "options": {"as_given": region_report(scene, base).to_dict()}}
         groups = split_reflected_facets(scene, base)
-    if request.frames != "scene":
-        from saucerfab.optimize.framing import fit_frames
-
-        scene = fit_frames(scene, base, request.frames, groups)
-    s = scene.direct.image_size
-    t = int(min(TEXTURE_MAX, max(1024, s)))
     # the views whose picture is given (direct and reflected always; reflected2 with a prism)
     names = [v for v in VIEW_NAMES if getattr(request, v) is not None]
+    fits = request.fit_by_view()
+    pictures = {name: im.load_image(getattr(request, name)) for name in names}  # decoded once, fitted twice
+    shown = {}  # what of each picture is shown: all of it, or ("crop") its content's box
+    for name in names:
+        if fits[name] == "crop" and getattr(request, f"{name}_mask") is not None:
+            raise ConfigError(
+                f"--fit crop cuts the {name} picture to its content, but its mask file covers the whole picture; "
+                f"give --fit {name}=pad with the mask file, or leave the mask out"
+            )
+        shown[name] = fitting.crop_to_content(pictures[name], request.background) if fits[name] == "crop" else pictures[name]
+    if request.frames != "scene":
+        from saucerfab.optimize.framing import fit_frames, frame_notes
+
+        # each frame at the aspect of what its picture shows
+        aspects = {n: shown[n].size[0] / shown[n].size[1] for n in names}
+        square = fit_frames(scene, base, request.frames, groups)
+        scene = fit_frames(scene, base, request.frames, groups, aspects)
+        print_notes = [*print_notes, *frame_notes(square, scene, aspects)]
+    s = scene.direct.image_size
+    t = int(min(TEXTURE_MAX, max(1024, s)))
     mask_paths: dict[str, Path | None] = {v: getattr(request, f"{v}_mask") for v in names}
     render, texture, masks, inputs = {}, {}, {}, {}
     problems: list[str] = []
-    fits = request.fit_by_view()
     for name in names:
         path = getattr(request, name)
-        loaded = im.load_image(path)  # decoded once, fitted at two sizes
+        loaded = pictures[name]
         fname = Path(path).name
-        fitting = {"fit": fits[name], "background": request.background}
+        fit_args = {"fit": fits[name], "background": request.background}
         if request.enhancement == "none" and request.ablation == "full":
-            view = prepare_image(path, s, mask_method="none", loaded=loaded, **fitting)
+            view = prepare_image(path, s, mask_method="none", loaded=loaded, **fit_args)
         else:
             try:
-                view = prepare_image(path, s, mask_path=mask_paths[name], loaded=loaded, **fitting)
+                view = prepare_image(path, s, mask_path=mask_paths[name], loaded=loaded, **fit_args)
             except MaskError as exc:
                 if request.enhancement == "subject" or request.ablation != "full":
                     raise
                 # the reason without the machine's path to the file (design folders are reproducible)
                 why = str(exc).split(". Give")[0].replace(repr(str(path)), repr(fname))
                 problems.append(f"{name} picture: {why}")
-                view = prepare_image(path, s, mask_method="none", loaded=loaded, **fitting)
+                view = prepare_image(path, s, mask_method="none", loaded=loaded, **fit_args)
             else:
                 if view.mask_source == "threshold":
                     plain = plain_background_share(view)
@@ -146,7 +160,7 @@ def prepare(request: DesignRequest) -> Prepared:
         render[name] = view.flattened()
         masks[name] = view.mask
         # the texture keeps more of the input's detail than the render size
-        rgb_t, alpha_t, _ = im.fit_square(loaded, t, background=view.background, fit=fits[name])
+        rgb_t, alpha_t, _ = fitting.fit_square(loaded, t, background=view.background, fit=fits[name])
         texture[name] = rgb_t if alpha_t is None else im.flatten_alpha(rgb_t, alpha_t, view.background)
         inputs[name] = {"file": fname, "sha256": view.sha256, "mask_source": view.mask_source}
         if view.notes:

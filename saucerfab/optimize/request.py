@@ -16,7 +16,7 @@ from pathlib import Path
 from saucerfab.errors import ConfigError
 from saucerfab.eyes import DEFAULT_IPD_MM, EYES_USAGE, OLD_DESIGN_EYE_NAME, EyeSpec, parse_eyes
 from saucerfab.heightfield import HEIGHT_SCALE
-from saucerfab.images import FITS
+from saucerfab.fitting import FITS
 from saucerfab.optimize.energies import WEIGHTS
 from saucerfab.optimize.stages import ABLATION_STAGES, METHODS, check_weights, stage_cap, stages_for, stall_window
 from saucerfab.profiles import DEFAULT_PRINTER
@@ -116,10 +116,11 @@ class DesignRequest(_Weights):
             the pictures as they are otherwise (full-bleed photographs);
             "subject" always enhances (a picture without a usable mask is
             refused); "none" never does. Only with ``ablation="full"``.
-        fit: how each picture goes into its square frame: "pad" (the whole
-            picture, bands of the background beside a non-square one) or
-            "crop" (the frame filled, the long side's margins cut off); one
-            rule for all, or per picture as "direct=crop,reflected=pad".
+        fit: what of each picture its frame shows, at that part's own aspect (a wide
+            picture gets a wide frame: :mod:`saucerfab.optimize.framing`): "pad" (the
+            whole picture) or "crop" (cut to its content: the box of what differs from
+            its background, :func:`saucerfab.fitting.crop_to_content`); one rule for all,
+            or per picture as "direct=crop,reflected=pad".
         background: "#rrggbb" of the padding and of what transparent areas
             show; None: each picture's border colour (median of its outer ring).
         color_init: "gray" (0.5 everywhere, the paper's choice) or "projected"

@@ -212,7 +212,7 @@ def create_app(
         return FileResponse(d / "thumb.png", media_type="image/png", headers={"Cache-Control": "max-age=86400"})
 
     async def upload_fitted(request: Request) -> Response:
-        from saucerfab.images import FITS
+        from saucerfab.fitting import FITS
 
         upload_id = request.path_params["id"]
         q = request.query_params
@@ -483,7 +483,8 @@ def _fitted_png(ws: Workspace, upload_id: str, fit: str, background: str | None,
     """An uploaded picture fitted into its square frame as the design fits it, as PNG bytes."""
     import numpy as np
 
-    from saucerfab.images import estimate_background, fit_square, flatten_alpha, load_image, parse_colour
+    from saucerfab.fitting import fit_square
+    from saucerfab.images import estimate_background, flatten_alpha, load_image, parse_colour
     from saucerfab.imageio import png_bytes
 
     rec = ws.upload_record(upload_id)

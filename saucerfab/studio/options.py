@@ -27,8 +27,8 @@ UPLOAD_FIELDS = ("direct", "reflected", "reflected2", "direct_mask", "reflected_
 STUDIO_SWITCHES: dict[str, Any] = {"verify": True}
 #: what each fit rule does, in a sentence (for the page's choices)
 FIT_RULES = {
-    "pad": "the whole picture is shown; bands of the background colour fill the frame beside a non-square one",
-    "crop": "the frame is filled; the long side's margins are cut off (as for photos)",
+    "pad": "the whole picture is shown; its frame takes its shape (a wide picture, a wide frame)",
+    "crop": "cut to its content (what differs from its background); the frame takes that shape",
 }
 
 
@@ -52,7 +52,7 @@ def option_choices() -> dict[str, Any]:
     """What ``GET /api/options`` answers (less the limits and samples, which the app adds)."""
     from saucerfab.cups import CUP_CLASSES
     from saucerfab.heightfield import BASE_SHAPES
-    from saucerfab.images import FITS
+    from saucerfab.fitting import FITS
     from saucerfab.optimize.request import ENHANCEMENTS, FRAMES, METHODS, DesignRequest
     from saucerfab.optimize.stages import STAGE_CAPS
     from saucerfab.profiles import list_profiles

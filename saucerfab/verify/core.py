@@ -8,9 +8,11 @@ each eye (:mod:`.eyes`):
 1. render the view from the eye (:class:`~.raytrace.PrintTracer`), keeping
    the frame the design used (same target, same angle);
 2. compare with the view's reference picture (the input as the designer
-   meant it, resized to the render with a box filter) over the pixels where
-   the saucer's top is seen - directly for the direct view, in the mirror
-   for the reflected ones - and only pixels seen fully (coverage >= 0.999);
+   meant it, resized to the render with a box filter) over the pixels of the
+   picture's rectangle in the frame (``scene.json``'s ``extent``: a picture
+   keeps its aspect, the square's rest is padding) where the saucer's top is
+   seen - directly for the direct view, in the mirror for the reflected
+   ones - and only pixels seen fully (coverage >= 0.999);
    the PSNR leaves out the render's own sampling noise (estimated from its
    two halves, :class:`~.raytrace.ViewRender`), so it reads the converged
    render's score at any sample count;
@@ -23,7 +25,7 @@ each eye (:mod:`.eyes`):
    itself after the best whole-picture shift (:func:`~.metrics.best_shift`,
    up to ``MAX_SHIFT_FRACTION`` of the frame), which no print can pass
    (a perfectly flat print scores 12-25 dB there);
-4. coverage is the share of the frame the saucer fills in that view;
+4. coverage is the share of the picture's rectangle the saucer fills in that view;
 5. from each eye, the primary file's **whole view** (:mod:`.wholeview`):
    everything of the piece the eye sees, against the ideal whole view (each
    picture in its frame, its background around it), with the stray share of
@@ -72,7 +74,7 @@ from saucerfab.verify.wholeview import DEFAULT_MAX_STRAY
 #: default pass level per view, dB: a picture at 20 dB is plainly recognisable
 #: with visible flaws; graphic designs print at 30 dB and more from the design eye
 DEFAULT_MIN_PSNR_DB = 20.0
-#: default least share of the frame the saucer must fill in every view
+#: default least share of the picture's rectangle in its frame the saucer must fill in every view
 DEFAULT_MIN_COVERAGE = 0.5
 DEFAULT_RES = 256
 DEFAULT_SPP = 16
@@ -133,6 +135,15 @@ def resize_box(img: np.ndarray, size: int) -> np.ndarray:
         for c in range(3)
     ]
     return np.clip(np.stack(planes, -1), 0.0, 1.0).astype(np.float32)
+
+
+def picture_box(mask: np.ndarray) -> tuple[slice, slice]:
+    """The rows and columns of (S, S) ``mask``'s bounding box: a picture's rectangle
+    (:meth:`~.printfolder.ViewSpec.picture_mask`) as slices, to crop a frame to the picture."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0:
+        return slice(None), slice(None)
+    return slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1)
 
 
 def _check_levels(res: int, spp: int, min_psnr_db: float, min_coverage: float, max_stray: float = DEFAULT_MAX_STRAY) -> None:
@@ -227,6 +238,13 @@ def verify_print(
     wholes: list[WholeViewScore] = []
     renders: dict[tuple[str, str], np.ndarray] = {}
     max_shift = round(MAX_SHIFT_FRACTION * res)
+    picture_masks = {v: scene.views[v].picture_mask(res) for v in views}  # each picture's rectangle in its frame
+    for v, mask in picture_masks.items():
+        if not mask.any():
+            raise ConfigError(
+                f"the {v} picture is a sliver of its frame (scene.json extent {list(scene.views[v].extent)}) and "
+                f"holds no pixel centre at --res {res}; verify with a larger --res"
+            )
     limits = folder_limits(folder)  # the export's own sizes, within what saucerfab exports
     for k, (fmt, path) in enumerate(files):
         surface = read_surface(path, fmt, scene, limits)
@@ -241,7 +259,9 @@ def verify_print(
             for view in views:
                 r = tracer.render(eye.position, scene.views[view], res, spp)
                 cov = r.coverage(view)
-                region = cov >= FULL_COVERAGE
+                # only the picture's rectangle is scored: the square's rest is padding, which may fall off the saucer
+                in_picture = picture_masks[view]
+                region = (cov >= FULL_COVERAGE) & in_picture
                 ref = refs[view]
                 noise = sampling_variance(r)  # the render's own noise is not the print's error
                 p0 = psnr(r.rgb, ref, region, noise)
@@ -260,7 +280,7 @@ def verify_print(
                     p1 = psnr(r.rgb, ref1, reg1, sampling_variance(r, flat))  # two renders' noise, shared in part
                     kind = REFERENCE_FLAT_PRINT
                 s = ssim(r.rgb, ref1, reg1)
-                coverage = float(cov.mean())
+                coverage = float(cov[in_picture].mean())  # the share of the picture's rectangle the saucer fills
                 ok = math.isfinite(p1) and p1 >= min_psnr_db and coverage >= min_coverage
                 score = ViewScore(view, eye.name, p1, p0, s, coverage, int(reg1.sum()), (sh_dx, sh_dy), ok,
                                   reference=kind, psnr_shift_db=p_shift)
@@ -268,7 +288,8 @@ def verify_print(
                     from saucerfab.verify.pictures import write_view_picture
 
                     stem = f"{eye.name}_{view}" if k == 0 else f"{fmt}_{eye.name}_{view}"
-                    score.picture = write_view_picture(pictures, stem, r.rgb, ref1, reg1, score).name
+                    box = picture_box(in_picture)  # the picture as scored, at its own aspect
+                    score.picture = write_view_picture(pictures, stem, r.rgb[box], ref1[box], reg1[box], score).name
                 if k == 0:
                     renders[(eye.name, view)] = r.rgb
                     renders[(eye.name, view + ":region")] = reg1

@@ -143,7 +143,8 @@ class FlatPrints:
         cup: the mirror cup. design_eye: the design eye, mm.
         views: view name -> its frame. pictures: view name -> (H, W, 3) uint8 reference picture.
         regions: view name -> (S, S) bool, where the design eye sees the top fully in that view
-            (verify's compared pixels from the design eye).
+            (verify's compared pixels from the design eye: inside the picture's rectangle, so the plate
+            carries the picture, not its frame's padding).
         size, spp: the render size and samples per pixel of the design eye's renders.
     """
 

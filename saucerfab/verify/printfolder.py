@@ -5,7 +5,8 @@ textures, ``scene.json`` (the viewing geometry in the files' millimetres,
 schema ``saucerfab.scene/1``, see :mod:`saucerfab.fabricate.scene_json`)
 and the reference pictures ``reference_<view>.png`` (each input picture as
 the designer meant it: alpha composited over the design's background and
-fitted into its square view frame by the design's rule).
+fitted into its square view frame by the design's rule, in the frame's
+centred rectangle ``extent`` when it keeps its own aspect).
 
 Everything here treats the folder as untrusted (a bureau verifies folders
 it was sent): ``scene.json`` is size-bounded and every number is checked,
@@ -29,7 +30,7 @@ from saucerfab.design import reference_name
 from saucerfab.cups import CUP_CLASSES, Cup, cup_from_dict
 from saucerfab.errors import ConfigError, InputFileError
 from saucerfab.formats import TABLE
-from saucerfab.scene import MAX_GRID
+from saucerfab.scene import EXTENT_TOLERANCE, FULL_EXTENT, MAX_GRID
 
 #: largest scene.json read (a real one is about 1.5 kB)
 MAX_SCENE_JSON_BYTES = 1 << 20
@@ -58,11 +59,29 @@ class ViewSpec:
         target: (3,) point the view axis passes through, mm.
         viewing_angle_deg: SoftRas's half field of view: tan(angle) = half
             the frame's width / depth along the axis.
+        extent: (ex, ey) the picture's half width and half height in the
+            frame's NDC (:mod:`saucerfab.render.camera`): the picture covers
+            the centred rectangle ``|x_ndc| <= ex``, ``|y_ndc| <= ey`` of the
+            square frame, the rest is its background; (1, 1) the whole square.
     """
 
     name: str
     target: tuple[float, float, float]
     viewing_angle_deg: float
+    extent: tuple[float, float] = FULL_EXTENT
+
+    def picture_mask(self, size: int) -> np.ndarray:
+        """(size, size) bool: the frame's pixels whose centres lie inside the picture's rectangle.
+
+        Pixel (row i, column j) of a ``size`` px frame has its centre at
+        ``x_ndc = (2j + 1) / size - 1``, ``y_ndc = 1 - (2i + 1) / size``; it is
+        inside when ``|x_ndc| <= ex`` and ``|y_ndc| <= ey``. Compared as
+        ``|2k + 1 - size| <= e * size`` (an odd integer against one product), so
+        the rectangle is symmetric and (1, 1) is every pixel, with no rounding.
+        """
+        off = np.abs(2 * np.arange(size, dtype=np.float64) + 1 - size)  # |centre| in half pixels
+        ex, ey = self.extent
+        return (off <= ey * size)[:, None] & (off <= ex * size)[None, :]
 
 
 @dataclass(frozen=True)
@@ -134,6 +153,17 @@ def _vec(path: Path, v: Any, n: int, what: str) -> tuple[float, ...]:
     return tuple(_num(path, x, what) for x in v)
 
 
+def _extent(path: Path, v: Any, what: str) -> tuple[float, float]:
+    """A view's ``extent``: two numbers in (0, 1], the larger 1 within :data:`EXTENT_TOLERANCE` (made exactly 1)."""
+    ex, ey = _vec(path, v, 2, what)
+    rule = (f"{what} is the picture's half width and half height in its square frame: two numbers in (0, 1], "
+            f"the larger 1 (a 2:1 picture: [1.0, 0.5])")
+    if not (0.0 < ex <= 1.0 and 0.0 < ey <= 1.0) or max(ex, ey) < 1.0 - EXTENT_TOLERANCE:
+        raise _bad(path, f"{rule}; got {[ex, ey]}")
+    # a side at 1 is the frame's own edge: exactly 1, so that a writer's rounding loses no edge pixel
+    return (1.0 if ex >= 1.0 - EXTENT_TOLERANCE else ex, 1.0 if ey >= 1.0 - EXTENT_TOLERANCE else ey)
+
+
 def _obj(path: Path, d: Any, key: str) -> dict[str, Any]:
     v = d.get(key) if isinstance(d, dict) else None
     if not isinstance(v, dict):
@@ -182,7 +212,8 @@ def load_print_scene(folder: Path) -> PrintScene:
         fwd = np.subtract(target, camera)
         if np.linalg.norm(np.cross(fwd / np.linalg.norm(fwd), (0.0, 0.0, 1.0))) < 1e-9:
             raise _bad(path, f"views.{name} looks straight up or down; its image orientation is undefined")
-        views[name] = ViewSpec(name, target, angle)  # type: ignore[arg-type]
+        extent = _extent(path, v["extent"], f"views.{name}.extent") if "extent" in v else FULL_EXTENT
+        views[name] = ViewSpec(name, target, angle, extent)  # type: ignore[arg-type]
     for name in ("direct", "reflected"):
         if name not in views:
             raise _bad(path, f"views.{name} is missing")

@@ -39,7 +39,7 @@ class ViewScore:
         psnr_db: PSNR against ``reference``, dB; NaN if nothing is seen.
         psnr_unshifted_db: PSNR against the reference picture itself, no shift, dB.
         ssim: mean SSIM against ``reference`` over the compared pixels.
-        coverage: share of the frame where the saucer is seen in this view.
+        coverage: share of the picture's rectangle in its frame (``extent``) where the saucer is seen in this view.
         pixels: pixels compared.
         shift_px: (dx, dy) the reference picture was moved (right, down) for ``psnr_shift_db``.
         passed: psnr and coverage at least the levels asked for.

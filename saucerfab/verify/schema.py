@@ -22,7 +22,7 @@ VIEW_SCORE: dict[str, Any] = {
                                                          "whole-picture shift (`shift_px`); null from the design eye"},
         "ssim": _NUM_OR_NULL,
         "coverage": {"type": "number", "minimum": 0, "maximum": 1,
-                     "description": "share of the view's frame where the saucer is seen (directly / in the mirror)"},
+                     "description": "share of the picture's rectangle in the view's frame (its extent) where the saucer is seen (directly / in the mirror)"},
         "pixels": {"type": "integer", "minimum": 0, "description": "pixels compared (seen fully)"},
         "shift_px": {"type": "array", "items": {"type": "integer"}, "minItems": 2, "maxItems": 2,
                      "description": "reference picture moved right, down for psnr_shift_db, pixels"},

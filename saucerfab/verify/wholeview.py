@@ -15,13 +15,13 @@ directly, or all of it in the mirror), is the mean over the pixel's
 sub-samples of:
 
 * the top seen directly: the direct reference picture's colour where the point lies
-  inside the direct frame as that frame projects onto the saucer (the point
-  mapped through the design eye's direct camera to frame pixels), else the
-  direct picture's background colour;
+  inside the direct frame's picture as it projects onto the saucer (the point
+  mapped through the design eye's direct camera to frame pixels, inside the
+  picture's rectangle, ``extent``), else the direct picture's background colour;
 * the top seen in the mirror: the reflected reference's colour where the point lies
-  in the region the reflected frame shows of the saucer (the design eye's
-  reflected frame, whose pixels' saucer points come from a position pass and
-  are inverted locally, :class:`FrameMaps`),
+  in the region the reflected frame's picture shows of the saucer (the design
+  eye's reflected frame, whose pixels' saucer points come from a position pass
+  and are inverted locally, :class:`FrameMaps`; the pixels of its rectangle),
   else the reflected picture's background colour;
 * any other surface of the part (walls, base, seat plate; only the top can lie
   in a frame): the background colour of the way it is seen - a person sees
@@ -190,6 +190,9 @@ class FrameMaps:
     placed in the frame by the pixel whose point is nearest and that pixel's
     local affine map (the grid's differences to its neighbours), and lies
     inside where the pixel it lands in is one the mirror shows the saucer in.
+    "In the frame" means in its picture: the centred rectangle of the square
+    frame the picture covers (``scene.json``'s ``extent``; the rest of the
+    square is the picture's background, so a point there is surround).
     (A triangulation of the points in (x, y) fails here: the mirror squeezes
     the frame's grid several times more along one axis than the other.)
 
@@ -223,15 +226,22 @@ class FrameMaps:
             good = ok & np.isfinite(jac).all((-1, -2)) & (np.abs(np.linalg.det(np.nan_to_num(jac))) > 0)
             inv = np.full((size * size, 2, 2), np.nan)
             inv[good.ravel()] = np.linalg.inv(jac.reshape(-1, 2, 2)[good.ravel()])
-            self._grid[name] = (_Nearest(xy.reshape(-1, 2), good.ravel()), xy.reshape(-1, 2), inv, ok)
+            # the map is built from every pixel the mirror shows (whole slopes up to the rectangle's edge);
+            # a point is in the frame only where it lands in the picture's rectangle
+            framed = ok & view.picture_mask(size)
+            self._grid[name] = (_Nearest(xy.reshape(-1, 2), good.ravel()), xy.reshape(-1, 2), inv, framed)
 
     def locate(self, name: str, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 2) frame pixel coordinates (column, row; ``size`` px a side) of saucer points ``xyz`` (N, 3) in
-        view ``name``, and (N,) bool, inside the frame."""
+        view ``name``, and (N,) bool, inside the frame's picture (its rectangle, :attr:`ViewSpec.extent`)."""
         n, s = xyz.shape[0], self.size
         if name == "direct":
             cr, depth = project(xyz, self.design_eye, self.views[name], s)
             inside = (depth > 0) & np.isfinite(cr).all(-1) & (cr >= 0).all(-1) & (cr <= s).all(-1)
+            # the picture's rectangle, |x_ndc| <= ex and |y_ndc| <= ey, in pixels: |2 col - s| <= ex s; with
+            # extent (1, 1) this is the square above exactly (rounding is monotone), so older prints score alike
+            ex, ey = self.views[name].extent
+            inside &= (np.abs(2.0 * cr[:, 0] - s) <= ex * s) & (np.abs(2.0 * cr[:, 1] - s) <= ey * s)
             return cr, inside
         if name not in self._grid or n == 0:
             return np.full((n, 2), np.nan), np.zeros(n, bool)

@@ -222,7 +222,7 @@ def test_scene_json_has_the_schema_and_matches_the_files(exported: ExportResult,
     assert sj["camera"]["up"] == [0.0, 0.0, 1.0]
     for view in ("direct", "reflected"):
         v = sj["views"][view]
-        assert set(v) == {"target", "viewing_angle_deg", "width", "height"}
+        assert set(v) == {"target", "viewing_angle_deg", "width", "height", "extent"}
         assert v["viewing_angle_deg"] == getattr(design.scene, view).viewing_angle_deg
     cup = sj["cup"]
     assert cup["shape"] == "circle" and set(cup) == {"shape", "center", "bottom_z", "height", "radius"}
