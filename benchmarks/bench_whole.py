@@ -64,16 +64,45 @@ def scores(print_dir: Path, pictures: Path | None) -> dict:
     return out
 
 
+def wide_pairs(folder: Path) -> dict[str, tuple[str, str]]:
+    """Two pairs with a 2:1 picture, made from the bundled ones (two copies side by side), added to the pairs table."""
+    import bench_speed
+    from PIL import Image
+
+    from saucerfab.samples import SAMPLES
+
+    made = {}
+    for name in ("direct_heart.png", "reflected_star.png"):
+        one = Image.open(SAMPLES / name).convert("RGBA")
+        two = Image.new("RGBA", (2 * one.width, one.height), (0, 0, 0, 0))
+        two.paste(one, (0, 0))
+        two.paste(one, (one.width, 0))
+        made[name] = str(folder / f"two_{name}")
+        two.save(made[name])
+    wide = {"heart-2stars": ("direct_heart.png", made["reflected_star.png"]),
+            "2hearts-star": (made["direct_heart.png"], "reflected_star.png")}
+    PAIRS.update(wide)  # one table for this module and bench_speed's design() (absolute paths join as they are)
+    bench_speed.PAIRS.update(wide)
+    return wide
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--old", required=True, help="git revision of the code before the change")
+    p.add_argument("--old", default="HEAD", help="git revision of the code before the change")
     p.add_argument("--pairs", default="all", help=f"comma-separated or all: {', '.join(PAIRS)}")
     p.add_argument("--arm", action="append", default=[], metavar="LABEL=OPTIONS",
                    help="one more configuration of this checkout, e.g. frames-only='--surround-weight 0'")
+    p.add_argument("--no-old", action="store_true",
+                   help="only this checkout (and the --arm ones): the old code's figures come from an earlier run")
     p.add_argument("--pictures", type=Path, help="keep each arm's whole-view picture here")
     p.add_argument("--json", help="also write the rows as JSON here")
+    p.add_argument("--wide", action="store_true",
+                   help="two more pairs with a 2:1 picture made here (two stars side by side): heart-2stars "
+                        "(reflected 2:1) and 2hearts-star (direct 2:1)")
     args = p.parse_args()
     pairs = list(PAIRS) if args.pairs == "all" else args.pairs.split(",")
+    if args.wide:
+        pairs += list(wide_pairs(Path(tempfile.mkdtemp(prefix="saucerfab-wide-"))))
     unknown = [x for x in pairs if x not in PAIRS]
     if unknown:
         p.error(f"unknown pairs {unknown}; known: {', '.join(PAIRS)}")
@@ -81,10 +110,10 @@ def main() -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp_s:
         tmp = Path(tmp_s)
-        old = old_copy(args.old, tmp / "old")
         subprocess.run([sys.executable, "-m", "saucerfab.warmup"], cwd=ROOT, env=_env(ROOT), check=True,
                        capture_output=True)
-        arms = [("old", old, []), ("new", ROOT, [])]
+        arms = [] if args.no_old else [("old", old_copy(args.old, tmp / "old"), [])]
+        arms += [("new", ROOT, [])]
         arms += [(a.split("=", 1)[0], ROOT, shlex.split(a.split("=", 1)[1])) for a in args.arm]
         for k, pair in enumerate(pairs):
             row: dict = {"pair": pair}
@@ -114,7 +143,7 @@ def main() -> int:
             print(f"| {r['pair']} | {label} | {d['seconds']:.1f} ({d['cpu_s']:.1f}) | {d['direct/design']:.1f} / "
                   f"{d['reflected/design']:.1f} | {moved} | {d['whole_db']:.1f} | {d['stray_direct']:.1%} / "
                   f"{d['stray_reflected']:.1%} | {d['width_share']:.0%} |")
-    for label in labels[1:]:
+    for label in ([] if args.no_old else labels[1:]):
         t_old = sum(r["old"]["seconds"] for r in rows)
         t_new = sum(r[label]["seconds"] for r in rows)
         c_old = sum(r["old"]["cpu_s"] for r in rows)
