@@ -143,9 +143,13 @@ def surround_sizes(scene: Scene, footprint: np.ndarray, samples: int = BALANCE_S
     direct, mirror = view_areas(scene, pts, up)
     cell = ((x1 - x0) / (samples - 1)) * ((y1 - y0) / (samples - 1)) / AREA_STEP**2
     cam = Camera.from_scene(scene, "direct")
-    frames_r = sum(4.0 * (Camera.from_scene(scene, v).tan_angle / cam.tan_angle) ** 2
-                   for v in ("reflected", "reflected2") if v == "reflected" or scene.reflected2 is not None)
-    return max(float(direct.sum() * cell) - 4.0, 1e-12), max(float(mirror.sum() * cell) - frames_r, 1e-12)
+
+    def picture(view: str) -> float:  # the picture's rectangle (its extent in its square view), in cam's NDC
+        frame = getattr(scene, view)
+        return 4.0 * frame.extent[0] * frame.extent[1] * (Camera.from_scene(scene, view).tan_angle / cam.tan_angle) ** 2
+
+    frames_r = sum(picture(v) for v in ("reflected", "reflected2") if v == "reflected" or scene.reflected2 is not None)
+    return max(float(direct.sum() * cell) - picture("direct"), 1e-12), max(float(mirror.sum() * cell) - frames_r, 1e-12)
 
 
 def shown_by_cup(scene: Scene, points: np.ndarray, normals: np.ndarray, balance: float = 1.0) -> np.ndarray:

@@ -118,3 +118,18 @@ def test_a_bad_mirror_colour_is_refused(bad) -> None:  # noqa: ANN001
 
     with pytest.raises(ConfigError, match="mirror_rgb"):
         FabOptions(mirror_rgb=bad)
+
+
+def test_the_surrounds_leave_out_the_pictures_rectangles_not_their_squares() -> None:
+    from saucerfab.heightfield import base_shape
+    from saucerfab.optimize.framing import fit_frames
+
+    scene = replace(Scene(), saucer=replace(Scene().saucer, resolution=24))
+    base = base_shape("waves", 24)
+    footprint = np.array([[-0.5, 0.5], [-1.5, 0.45]])
+    d1, m1 = surround_sizes(fit_frames(scene, base, "inscribed"), footprint)
+    # 3:2 pictures: wider squares around smaller rectangles (areas in the direct camera's units, which
+    # change with its frame: their ratio is what counts); the balance of the surrounds barely changes
+    d2, m2 = surround_sizes(fit_frames(scene, base, "inscribed", aspects={"direct": 1.5, "reflected": 1.5}), footprint)
+    assert m2 / d2 == pytest.approx(m1 / d1, rel=0.6)  # (subtracting the squares: 2.26 against 0.34)
+    assert 0.25 < m2 / d2 < 0.75
