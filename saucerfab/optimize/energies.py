@@ -35,12 +35,16 @@ if TYPE_CHECKING:
     import torch
 
 
-def e_visual(rendered: list[torch.Tensor], targets: list[torch.Tensor]) -> torch.Tensor:
+def e_visual(rendered: list[torch.Tensor], targets: list[torch.Tensor],
+             masks: list[torch.Tensor | None] | None = None) -> torch.Tensor:
     """Squared Frobenius distance summed over views (eq. 2 / eq. 7).
 
     Args:
         rendered: per view an (S, S, 3) image.
         targets: per view an (S, S, 3) image of the same size.
+        masks: per view None (every pixel) or an (S, S, 1) 0/1 tensor: the pixels of
+            the view's picture (its rectangle in the square view,
+            :meth:`saucerfab.optimize.views.Rig.picture_masks`); None: every view whole.
     """
     import torch
 
@@ -48,8 +52,9 @@ def e_visual(rendered: list[torch.Tensor], targets: list[torch.Tensor]) -> torch
     # rounds by more than the changes the line search has to compare.
     total = rendered[0].new_zeros((), dtype=torch.float64)
     squared_distance = _squared_distance()
-    for r, t in zip(rendered, targets, strict=True):
-        total = total + squared_distance.apply(r, t)
+    for k, (r, t) in enumerate(zip(rendered, targets, strict=True)):
+        m = None if masks is None else masks[k]
+        total = total + (squared_distance.apply(r, t) if m is None else (((r - t) * m) ** 2).sum(dtype=torch.float64))
     return total
 
 

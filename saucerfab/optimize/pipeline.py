@@ -354,6 +354,8 @@ class _StageLoop:
         self._targets: dict[tuple[str, float], dict[str, Any]] = {}
         #: the whole view around the frames (saucerfab.optimize.surround); None with surround_weight 0
         self.surround = Surround(rig, prep, request.background) if request.surround_weight > 0 else None
+        #: per view, the pixels of its picture's rectangle (None: the whole square), what E_visual scores
+        self.masks = rig.picture_masks()
         self.stage_t0 = time.perf_counter()
 
         # weights from rho (section 3.5) unless given
@@ -456,6 +458,7 @@ class _StageLoop:
         rig, sigma = self.rig, spec.sigma
 
         multi = bool(self.eyes)
+        masks = self.masks
         if multi:
             self.eye_targets_for(spec.targets, sigma)  # made once, before the solver's clock
         w_surround, surround = float(self.request.surround_weight), self.surround
@@ -463,7 +466,7 @@ class _StageLoop:
             surround.targets_for(spec.targets, sigma)  # made once, before the solver's clock
 
         def objective(hh: torch.Tensor, cc: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
-            ev = e_visual(rig.render(hh, cc, sigma), targets)
+            ev = e_visual(rig.render(hh, cc, sigma), targets, masks)
             if multi:  # --eyes: the weighted sum over the eyes (the design eye alone: the paper's, untouched)
                 ev = self.e_visual_eyes(spec, ev, hh, cc)
             terms = [(key, w, fn(hh, cc)) for key, fn, w in smooth]
@@ -538,7 +541,7 @@ class _StageLoop:
             )
         face_view = classify_faces(visible_faces(rig, h.numpy().reshape(rig.n, rig.n)))
         with torch.no_grad():
-            ev_t = e_visual(rig.render(h, c, spec.sigma), target_list)
+            ev_t = e_visual(rig.render(h, c, spec.sigma), target_list, self.masks)
             ev = float(ev_t)
             eyes_part = {"E_visual_eyes": float(self.e_visual_eyes(spec, ev_t, h, c))} if self.eyes else {}
             if self.surround is not None:

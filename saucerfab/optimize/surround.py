@@ -18,7 +18,9 @@ picture where a face's centre lies inside the frame and with the view's
 **background** elsewhere, soft-rendered at the stage's sigma. Its energy,
 ``E_surround``, is the squared distance to that target over the pixels
 *outside* the frame only (inside, the frame's own E_visual scores), each
-pixel weighted by its area in frame pixels, so ``surround_weight = 1``
+pixel weighted by its area in frame pixels (the square's padding around a
+non-square picture is surround too; its E_visual scores only the picture's
+rectangle), so ``surround_weight = 1``
 (the default) counts a square millimetre around a picture as much as one
 inside it.
 
@@ -43,7 +45,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from saucerfab.optimize.views import BACKGROUND, ViewMesh, ViewMeshes
+from saucerfab.optimize.views import BACKGROUND, ViewMesh, ViewMeshes, frame_extent
 from saucerfab.render.camera import Camera
 
 if TYPE_CHECKING:
@@ -77,29 +79,30 @@ def whole_camera(frame: Camera, points: np.ndarray) -> Camera:
     return Camera(frame.eye, covering.target, angle, size)
 
 
-def outside_weights(whole: Camera, frame: Camera) -> np.ndarray:
-    """(S, S) float64: each whole-view pixel's area in ``frame`` pixels, 0 where its centre is inside the frame.
+def outside_weights(whole: Camera, frame: Camera, extent: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
+    """(S, S) float64: each whole-view pixel's area in ``frame`` pixels, 0 where its centre is inside the picture.
 
-    Both cameras share the eye, so a pixel's ray lies inside the frame when it
-    projects into the frame's square ``[-1, 1]^2``.
+    Both cameras share the eye, so a pixel's ray lies inside the picture when it
+    projects into the picture's rectangle ``|x| <= ex, |y| <= ey`` of the frame's NDC
+    (``extent``; the square's padding around a non-square picture is surround).
     """
     eye, d = whole.rays()
     ndc = frame.project(np.asarray(eye) + d)
-    inside = (np.abs(ndc[..., 0]) <= 1.0) & (np.abs(ndc[..., 1]) <= 1.0) & (ndc[..., 2] > 0)
+    inside = (np.abs(ndc[..., 0]) <= extent[0]) & (np.abs(ndc[..., 1]) <= extent[1]) & (ndc[..., 2] > 0)
     # pixel area ratio at the axis (the two fields of view are a few degrees apart: the
     # projection's own stretch across them differs by well under 1 %)
     area = ((2 * whole.tan_angle / whole.image_size) / (2 * frame.tan_angle / frame.image_size)) ** 2
     return np.where(inside, 0.0, area)
 
 
-def inside_frame(view: ViewMesh, heights: np.ndarray) -> np.ndarray:
-    """(F',) bool: the view's faces whose centre lies inside its frame (the frame camera's square)."""
+def inside_frame(view: ViewMesh, heights: np.ndarray, extent: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
+    """(F',) bool: the view's faces whose centre lies inside its picture (the rectangle ``extent`` of its square)."""
     faces = np.asarray(view.faces)
     if faces.shape[0] == 0:
         return np.zeros(0, bool)
     ndc = view.camera.project(view.vertices_np(heights))
     cen = ndc[faces].mean(axis=1)
-    return (np.abs(cen[:, 0]) <= 1.0) & (np.abs(cen[:, 1]) <= 1.0) & (cen[:, 2] > 0)
+    return (np.abs(cen[:, 0]) <= extent[0]) & (np.abs(cen[:, 1]) <= extent[1]) & (cen[:, 2] > 0)
 
 
 @dataclass
@@ -110,11 +113,13 @@ class WholeView:
         frame: the frame view (a :class:`~saucerfab.optimize.views.ViewMesh` or ``View``).
         camera: the whole view's camera (:func:`whole_camera`).
         weights: (S, S) float64 pixel weights, :func:`outside_weights`.
+        extent: the frame's picture rectangle in its square (:attr:`saucerfab.scene.ViewFrame.extent`).
     """
 
     frame: Any
     camera: Camera
     weights: np.ndarray
+    extent: tuple[float, float] = (1.0, 1.0)
     _weights_t: Any = field(default=None, repr=False)
 
     @property
@@ -155,17 +160,18 @@ def whole_views(rig: ViewMeshes, heights: np.ndarray) -> list[WholeView]:
         verts = view.vertices_np(h)
         cam = whole_camera(view.camera, verts[np.unique(faces)])
         margin = INNER_MARGIN_PX * (2 * cam.tan_angle / cam.image_size) / view.camera.tan_angle  # frame NDC
+        extent = frame_extent(rig.scene, view.name)
         ndc = view.camera.project(verts)
-        inner = (np.abs(ndc[:, :2]) < 1.0 - margin).all(axis=1) & (ndc[:, 2] > 0)
+        inner = (np.abs(ndc[:, :2]) < np.asarray(extent) - margin).all(axis=1) & (ndc[:, 2] > 0)
         keep = ~inner[faces].all(axis=1)
         mesh = ViewMesh(view.name, view.camera, np.asarray(view.xy), np.asarray(view.vert_src), faces[keep],
                         np.asarray(view.face_src)[keep], mirror=view.mirror)
-        out.append(WholeView(rig.as_view(mesh), cam, outside_weights(cam, view.camera)))
+        out.append(WholeView(rig.as_view(mesh), cam, outside_weights(cam, view.camera, extent), extent))
     return out
 
 
 def ideal_colors(view: ViewMesh, heights: np.ndarray, picture: np.ndarray, background: np.ndarray,
-                 num_faces: int) -> np.ndarray:
+                 num_faces: int, extent: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
     """(F, 3) saucer face colours of the ideal whole view: ``picture`` projected inside the frame, ``background`` outside.
 
     Indexed by saucer face as :func:`~saucerfab.optimize.targets.project_colors`;
@@ -176,7 +182,7 @@ def ideal_colors(view: ViewMesh, heights: np.ndarray, picture: np.ndarray, backg
     bg = np.asarray(background, np.float64)
     cols = project_colors(view, heights, picture, num_faces, fill=tuple(bg))
     src = np.asarray(view.face_src)
-    outside = src[~inside_frame(view, heights)]
+    outside = src[~inside_frame(view, heights, extent)]
     cols[outside] = bg
     return cols
 
@@ -197,7 +203,8 @@ def whole_targets(wholes: list[WholeView], heights: np.ndarray, pictures: dict[s
     h = torch.as_tensor(np.asarray(heights).reshape(-1), dtype=dtype)
     out = []
     for whole in wholes:
-        cols = ideal_colors(whole.frame, heights, pictures[whole.name], backgrounds[whole.name], num_faces)
+        cols = ideal_colors(whole.frame, heights, pictures[whole.name], backgrounds[whole.name], num_faces,
+                            whole.extent)
         with torch.no_grad():
             out.append(whole.render(h, torch.as_tensor(cols, dtype=dtype), sigma))
     return out

@@ -256,12 +256,37 @@ class Rig(ViewMeshes):
             out.append(img)
         return out
 
+    def picture_masks(self) -> list[torch.Tensor | None]:
+        """Per view, None when its picture fills its square, else an (S, S, 1) 0/1 tensor of the pixels
+        whose centres lie in the picture's rectangle (the frame's ``extent``): E_visual scores those
+        only, the square's rest is the surround (:mod:`saucerfab.optimize.surround`)."""
+        import torch
+
+        out: list[torch.Tensor | None] = []
+        for v in self.views:
+            extent = frame_extent(self.scene, v.name)
+            out.append(None if extent == (1.0, 1.0) else
+                       torch.as_tensor(inside_extent(v.camera, extent), dtype=torch.float32).unsqueeze(-1))
+        return out
+
     def reflected_face_mask(self) -> np.ndarray:
         """(F,) bool: saucer faces that take part in any reflected view."""
         m = np.zeros(self.num_faces, bool)
         for v in self.views[1:]:
             m[v.face_src.numpy()] = True
         return m
+
+
+def frame_extent(scene: Scene, view: str) -> tuple[float, float]:
+    """The extent of ``view``'s picture in its square frame (a missing reflected2 frame: reflected's)."""
+    frame = getattr(scene, view, None) or scene.reflected
+    return (float(frame.extent[0]), float(frame.extent[1]))
+
+
+def inside_extent(camera: Camera, extent: tuple[float, float]) -> np.ndarray:
+    """(S, S) bool: the pixels of ``camera`` whose centres lie in the rectangle ``|x| <= ex, |y| <= ey`` (NDC)."""
+    xs, ys = camera.pixel_ndc()
+    return (np.abs(ys)[:, None] <= extent[1]) & (np.abs(xs)[None, :] <= extent[0])
 
 
 def visible_faces(rig: ViewMeshes, heights: np.ndarray, supersample: int = 2) -> dict[str, np.ndarray]:

@@ -133,3 +133,25 @@ def test_crop_of_an_empty_picture_or_with_a_mask_file_is_refused_before_any_work
     with pytest.raises(ConfigError, match="--fit crop cuts the direct picture.*mask file"):
         prepare(DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", fit="crop",
                               direct_mask=tmp_path / "mask.png", resolution=16, image_size=32))
+
+
+def test_e_visual_scores_only_the_pictures_rectangle() -> None:
+    torch = pytest.importorskip("torch")
+    from saucerfab.optimize.energies import e_visual
+    from saucerfab.optimize.views import Rig
+
+    scene = replace(paper_scene(), saucer=replace(paper_scene().saucer, resolution=12))
+    scene = replace(scene, reflected=replace(scene.reflected, image_size=16, extent=(1.0, 0.5)),
+                    direct=replace(scene.direct, image_size=16))
+    rig = Rig(scene, base_shape("waves", 12))
+    masks = rig.picture_masks()
+    assert masks[0] is None  # the direct picture fills its square
+    m = masks[1][..., 0].numpy()
+    assert m.shape == (16, 16) and m[4:12].all() and not m[:4].any() and not m[12:].any()
+    r = [torch.zeros(16, 16, 3), torch.zeros(16, 16, 3)]
+    t = [torch.zeros(16, 16, 3), torch.zeros(16, 16, 3)]
+    t[1][:4] = 1.0  # a difference in the padding band only: not scored
+    assert float(e_visual(r, t, masks)) == 0.0
+    t[1][8, 8] = 0.5  # inside the rectangle: scored
+    assert float(e_visual(r, t, masks)) == pytest.approx(0.75)
+    assert float(e_visual(r, t)) == pytest.approx(4 * 16 * 3 + 0.75)  # without masks: every pixel
