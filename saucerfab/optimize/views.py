@@ -170,7 +170,8 @@ class ViewMeshes:
         self._visible_memo: dict[int, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
 
     def visible_faces(self, heights: np.ndarray, supersample: int = 2) -> dict[str, np.ndarray]:
-        """Per view, (F,) bool: saucer faces that cover a (super)sample in that view, at ``heights`` (N, N) or (V,).
+        """Per view, (F,) bool: saucer faces that cover a (super)sample of its picture (the rectangle of the
+        frame's ``extent``) in that view, at ``heights`` (N, N) or (V,).
 
         The last result per ``supersample`` is kept (fresh copies are returned): a design's last
         stage classifies its final heights and the texturing right after asks for the same, with
@@ -188,6 +189,9 @@ class ViewMeshes:
             if view.faces.shape[0]:
                 cam = view.camera.with_size(view.camera.image_size * supersample)
                 fid, _, _ = rasterize_hard(view.vertices_np(h), view.faces, cam)
+                extent = frame_extent(self.scene, view.name)
+                if extent != (1.0, 1.0):  # seen in the picture's rectangle: the square's padding is surround
+                    fid = np.where(inside_extent(cam, extent), fid, -1)
                 # the view's faces hit by a sample, marked (np.unique would hash every sample: ~15 ms a view at 512 px)
                 hit = np.zeros(view.faces.shape[0], bool)
                 hit[fid[fid >= 0]] = True

@@ -155,3 +155,16 @@ def test_e_visual_scores_only_the_pictures_rectangle() -> None:
     t[1][8, 8] = 0.5  # inside the rectangle: scored
     assert float(e_visual(r, t, masks)) == pytest.approx(0.75)
     assert float(e_visual(r, t)) == pytest.approx(4 * 16 * 3 + 0.75)  # without masks: every pixel
+
+
+def test_a_face_is_seen_in_a_frame_only_inside_its_pictures_rectangle() -> None:
+    from saucerfab.optimize.views import ViewMeshes
+
+    base = base_shape("waves", 24)
+    scene = fit_frames(replace(paper_scene(), saucer=replace(paper_scene().saucer, resolution=24)), base, "inscribed")
+    square = ViewMeshes(scene, base, image_size=64).visible_faces(base)
+    half = replace(scene, direct=replace(scene.direct, extent=(1.0, 0.5)))
+    banded = ViewMeshes(half, base, image_size=64).visible_faces(base)
+    assert (banded["direct"] <= square["direct"]).all()  # a subset: the bands are the surround's
+    assert 0.3 < banded["direct"].sum() / square["direct"].sum() < 0.7
+    assert np.array_equal(banded["reflected"], square["reflected"])
