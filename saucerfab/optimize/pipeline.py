@@ -543,9 +543,9 @@ class _StageLoop:
         with torch.no_grad():
             ev_t = e_visual(rig.render(h, c, spec.sigma), target_list, self.masks)
             ev = float(ev_t)
-            eyes_part = {"E_visual_eyes": float(self.e_visual_eyes(spec, ev_t, h, c))} if self.eyes else {}
+            more_parts = {"E_visual_eyes": float(self.e_visual_eyes(spec, ev_t, h, c))} if self.eyes else {}
             if self.surround is not None:
-                eyes_part["E_surround"] = float(self.surround.energy(h, c, spec.targets, spec.sigma))
+                more_parts["E_surround"] = float(self.surround.energy(h, c, spec.targets, spec.sigma))
         reported: dict[str, float | None] = {}
         for t, fn in self.energies:
             if t.in_metrics and t.prox is None:
@@ -566,7 +566,7 @@ class _StageLoop:
                 "seconds": res.seconds,
                 "seconds_per_iteration": res.seconds / max(res.iterations, 1),
                 "E_visual": ev,
-                **eyes_part,
+                **more_parts,
                 **reported,
                 "conflict_fraction": conflict_share(face_view),
                 "max_abs_height_change": float((h - self.z).abs().max()),
