@@ -33,6 +33,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -86,6 +88,46 @@ def wide_pairs(folder: Path) -> dict[str, tuple[str, str]]:
     return wide
 
 
+def direct_width_share(scene) -> float:  # noqa: ANN001 (a saucerfab.scene.Scene)
+    """The direct picture's width over the saucer's visible width, along the picture's middle row (design eye).
+
+    The saucer's footprint (at height 0) is projected into the direct camera; its image is cut by the
+    row ``y_ndc = 0`` (the picture's middle); the picture spans ``2 * extent[0]`` of the NDC width.
+    """
+    from saucerfab.render.camera import Camera
+
+    cam = Camera.from_scene(scene, "direct")
+    (x0, x1), (y0, y1) = scene.saucer.x_range, scene.saucer.y_range
+    t = np.linspace(0.0, 1.0, 4001)
+    ys = y0 + t * (y1 - y0)
+    xs_hit = []
+    for y in ys:  # the footprint's row through the picture's middle: where the projection's y crosses 0
+        pts = np.stack([np.linspace(x0, x1, 2001), np.full(2001, y), np.zeros(2001)], axis=1)
+        ndc = cam.project(pts)
+        xs_hit.append(ndc[:, :2])
+    grid = np.stack(xs_hit)  # (rows, cols, 2)
+    near = np.abs(grid[..., 1]) < 2.0 / cam.image_size
+    width = float(grid[..., 0][near].max() - grid[..., 0][near].min())
+    return 2.0 * scene.direct.extent[0] / width
+
+
+def geometry(pairs: list[str]) -> None:
+    """Print each pair's frames as a design fits them (no design run): the pictures' extents and the
+    direct picture's share of the saucer's visible width."""
+    from saucerfab.optimize.prepare import prepare
+    from saucerfab.optimize.request import DesignRequest
+    from saucerfab.samples import SAMPLES
+
+    print("| pair | direct extent | reflected extent | direct picture's share of the saucer's width |")
+    print("|---|---|---|---:|")
+    for pair in pairs:
+        direct, reflected = PAIRS[pair]
+        prep = prepare(DesignRequest(direct=SAMPLES / direct, reflected=SAMPLES / reflected))
+        sc = prep.scene
+        print(f"| {pair} | {sc.direct.extent[0]:.2f} x {sc.direct.extent[1]:.2f} | {sc.reflected.extent[0]:.2f} x "
+              f"{sc.reflected.extent[1]:.2f} | {direct_width_share(sc):.0%} |", flush=True)
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--old", default="HEAD", help="git revision of the code before the change")
@@ -96,6 +138,9 @@ def main() -> int:
                    help="only this checkout (and the --arm ones): the old code's figures come from an earlier run")
     p.add_argument("--pictures", type=Path, help="keep each arm's whole-view picture here")
     p.add_argument("--json", help="also write the rows as JSON here")
+    p.add_argument("--geometry", action="store_true",
+                   help="only the frames as a design fits them (no design): extents and the direct picture's "
+                        "share of the saucer's visible width")
     p.add_argument("--wide", action="store_true",
                    help="two more pairs with a 2:1 picture made here (two stars side by side): heart-2stars "
                         "(reflected 2:1) and 2hearts-star (direct 2:1)")
@@ -106,6 +151,9 @@ def main() -> int:
     unknown = [x for x in pairs if x not in PAIRS]
     if unknown:
         p.error(f"unknown pairs {unknown}; known: {', '.join(PAIRS)}")
+    if args.geometry:
+        geometry(pairs)
+        return 0
     print(f"machine: {machine()}; old = {args.old}, new = this checkout; start load {_load()}", flush=True)
     rows = []
     with tempfile.TemporaryDirectory() as tmp_s:
