@@ -22,6 +22,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         FRAMES,
         METHODS,
         PRISM_PLACEMENTS,
+        SURROUND_WEIGHT,
         DesignRequest,
     )
 
@@ -153,7 +154,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="weight of the whole view around the pictures: the saucer seen outside the direct frame and its "
         "image in the cup outside the reflected frame aim at each picture's background, so neither picture "
         "shows as a ghost around the other; 0 scores the frames alone (the paper). Default "
-        f"{default('surround_weight')}",
+        f"{SURROUND_WEIGHT:g} (0 with --ablation, whose settings are the paper's)",
     )
     p.add_argument(
         "--ipd-mm",

@@ -353,7 +353,7 @@ class _StageLoop:
         self.project = CrestProjection(prep.target, scene, prep.base) if prep.target is not None else None
         self._targets: dict[tuple[str, float], dict[str, Any]] = {}
         #: the whole view around the frames (saucerfab.optimize.surround); None with surround_weight 0
-        self.surround = Surround(rig, prep, request.background) if request.surround_weight > 0 else None
+        self.surround = Surround(rig, prep, request.background) if request.surround() > 0 else None
         #: per view, the pixels of its picture's rectangle (None: the whole square), what E_visual scores
         self.masks = rig.picture_masks()
         self.stage_t0 = time.perf_counter()
@@ -461,7 +461,7 @@ class _StageLoop:
         masks = self.masks
         if multi:
             self.eye_targets_for(spec.targets, sigma)  # made once, before the solver's clock
-        w_surround, surround = float(self.request.surround_weight), self.surround
+        w_surround, surround = self.request.surround(), self.surround
         if surround is not None:
             surround.targets_for(spec.targets, sigma)  # made once, before the solver's clock
 

@@ -155,7 +155,9 @@ class DesignRequest(_Weights):
             (:mod:`saucerfab.optimize.surround`): the saucer seen directly outside the
             direct frame and the mirror's image of it outside the reflected frame aim at
             each picture's background, per unit of view area against the frames'
-            E_visual; 0 leaves them out (the paper's energy, the frames alone).
+            E_visual; 0 leaves them out (the paper's energy, the frames alone). None (the
+            default): :data:`SURROUND_WEIGHT` for the full method, 0 for an ablation (Figure 11's
+            settings are the paper's energies; a weight given with one is refused).
         ipd_mm: the distance between a viewer's eyes with ``eyes="both"`` (None: 64 mm,
             :data:`saucerfab.eyes.DEFAULT_IPD_MM`); refused with the other modes.
     """
@@ -187,7 +189,7 @@ class DesignRequest(_Weights):
     record_times: bool = True
     eyes: str = "design"
     ipd_mm: float | None = None
-    surround_weight: float = SURROUND_WEIGHT
+    surround_weight: float | None = None
 
     def eye_spec(self) -> EyeSpec:
         """The eyes the design is made for (:attr:`eyes`, :attr:`ipd_mm`), as verify takes them."""
@@ -262,8 +264,13 @@ class DesignRequest(_Weights):
                 "give --eyes design"
             )
         v = self.surround_weight
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0):
             raise ConfigError(f"surround_weight must be a non-negative number (0: the frames alone), got {v!r}")
+        if v and self.ablation != "full":
+            raise ConfigError(
+                f"--ablation {self.ablation} runs the paper's Figure 11 setting with the paper's energies, which score "
+                f"the frames alone; --surround-weight {v:g} would add the whole view: give one of the two"
+            )
         v = self.max_iters
         if v is not None and (isinstance(v, bool) or not isinstance(v, int)):
             raise ConfigError(f"max_iters must be a whole number of iterations per stage, got {v!r}")
@@ -279,6 +286,12 @@ class DesignRequest(_Weights):
         # (with --enhancement auto, whether the pictures get the enhancement is known once they are read)
         enhanced = {"subject": True, "none": False}.get(self.enhancement)
         check_weights(self.ablation, {w.key: getattr(self, w.key) for w in WEIGHTS}, self.method, enhanced)
+
+    def surround(self) -> float:
+        """The weight of the whole view around the frames this run uses (:attr:`surround_weight` resolved)."""
+        if self.surround_weight is not None:
+            return float(self.surround_weight)
+        return SURROUND_WEIGHT if self.ablation == "full" else 0.0
 
     def stage_cap(self, enhanced: bool = True) -> int:
         """Iterations per stage at most: :attr:`max_iters`, or the cap of the method that runs.

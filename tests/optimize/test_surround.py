@@ -179,3 +179,14 @@ def test_the_request_refuses_a_bad_surround_weight(bad) -> None:  # noqa: ANN001
 
     with pytest.raises(ConfigError, match="surround_weight"):
         DesignRequest(direct="a.png", reflected="b.png", surround_weight=bad)
+
+
+def test_the_whole_view_is_on_for_the_full_method_and_off_for_the_papers_ablations() -> None:
+    from saucerfab.optimize.request import SURROUND_WEIGHT, DesignRequest
+
+    assert DesignRequest(direct="a.png", reflected="b.png").surround() == SURROUND_WEIGHT == 1.0
+    assert DesignRequest(direct="a.png", reflected="b.png", surround_weight=0.0).surround() == 0.0
+    assert DesignRequest(direct="a.png", reflected="b.png", ablation="laplacian").surround() == 0.0
+    assert DesignRequest(direct="a.png", reflected="b.png", ablation="laplacian", surround_weight=0).surround() == 0.0
+    with pytest.raises(ConfigError, match="--ablation laplacian runs the paper's Figure 11 setting.*give one of the two"):
+        DesignRequest(direct="a.png", reflected="b.png", ablation="laplacian", surround_weight=1.0)
