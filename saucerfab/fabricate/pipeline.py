@@ -364,7 +364,7 @@ def export_design(
     from saucerfab.fabricate.atlas import TOP_SHARE, build_uvmap, layout_page
     from saucerfab.fabricate.bake import ATLAS_PNG_LEVEL, bake_page, vertex_colors
     from saucerfab.fabricate.scene_json import scene_json_bytes
-    from saucerfab.fabricate.sides import paint_sides, side_vertex_colours
+    from saucerfab.fabricate.sides import balance, paint_sides, side_vertex_colours
     from saucerfab.fabricate.solid import build_solid
     from saucerfab.fabricate.textured import TexturedMesh
     from saucerfab.imageio import png_bytes_many
@@ -391,8 +391,9 @@ def export_design(
     page, bake_stats = bake_page(dsg, layout, wall_rgb=opts.wall_rgb, inpaint=opts.inpaint)
     vrgb = vertex_colors(solid, uvmap, page, layout, opts.wall_rgb)
     if opts.mirror_rgb != opts.wall_rgb:  # what the cup shows of the plate: the reflected picture's background
-        paint_sides(page, solid, uvmap, scene, opts.mirror_rgb)
-        side_vertex_colours(vrgb, solid, scene, opts.mirror_rgb)
+        weight = balance(solid, scene)  # the two surrounds' sizes, once for the page and the vertices
+        paint_sides(page, solid, uvmap, scene, opts.mirror_rgb, weight)
+        side_vertex_colours(vrgb, solid, scene, opts.mirror_rgb, weight)
     t = step("bake", t)
     # split the step for the benchmark's table: top bake, unseen-area fill, the rest (page, vertex colours)
     timings["inpaint"] = bake_stats["inpaint_s"]

@@ -181,7 +181,7 @@ def face_normals(solid: Solid, faces: np.ndarray) -> np.ndarray:
 
 
 def paint_sides(page: np.ndarray, solid: Solid, uvmap: UVMap, scene: Scene,
-                mirror_rgb: tuple[int, int, int]) -> float:
+                mirror_rgb: tuple[int, int, int], weight: float) -> float:
     """Paint, in place, the texels of the page's charts (every face but the top) that the cup shows, ``mirror_rgb``.
 
     The rest of the charts keep the page's wall colour (the direct picture's
@@ -191,6 +191,7 @@ def paint_sides(page: np.ndarray, solid: Solid, uvmap: UVMap, scene: Scene,
 
     Args:
         page: (S, S, 3) uint8 atlas page.
+        weight: the two surrounds' balance, :func:`balance` of ``solid`` and ``scene``.
     Returns:
         The share (0..1) of the charts' texels painted.
     """
@@ -206,7 +207,7 @@ def paint_sides(page: np.ndarray, solid: Solid, uvmap: UVMap, scene: Scene,
         return 0.0
     corners = to_model(solid, solid.vertices[faces].reshape(-1, 3)).reshape(-1, 3, 3)
     points = np.einsum("kc,kcd->kd", bary, corners[ti])
-    shown = shown_by_cup(scene, points, face_normals(solid, faces)[ti], balance(solid, scene))
+    shown = shown_by_cup(scene, points, face_normals(solid, faces)[ti], weight)
     painted = np.zeros(s * s, bool)
     painted[pix[shown]] = True
     charts = np.zeros(s * s, bool)
@@ -223,8 +224,10 @@ def paint_sides(page: np.ndarray, solid: Solid, uvmap: UVMap, scene: Scene,
     return share
 
 
-def side_vertex_colours(vertex_rgb: np.ndarray, solid: Solid, scene: Scene, mirror_rgb: tuple[int, int, int]) -> None:
-    """Give, in place, the vertices of faces other than the top that the cup shows ``mirror_rgb`` (V, 3) uint8.
+def side_vertex_colours(vertex_rgb: np.ndarray, solid: Solid, scene: Scene, mirror_rgb: tuple[int, int, int],
+                        weight: float) -> None:
+    """Give, in place, the vertices of faces other than the top that the cup shows ``mirror_rgb`` (V, 3) uint8
+    (``weight``: as :func:`paint_sides`'s).
 
     A vertex of the top keeps its colour. A vertex's normal is the mean of its
     side faces' normals (a corner of the plate faces up and out).
@@ -240,5 +243,5 @@ def side_vertex_colours(vertex_rgb: np.ndarray, solid: Solid, scene: Scene, mirr
     on_top = np.zeros(solid.vertices.shape[0], bool)
     on_top[solid.faces[solid.is_top].ravel()] = True
     vid = np.setdiff1d(np.unique(faces), np.flatnonzero(on_top))
-    shown = shown_by_cup(scene, to_model(solid, solid.vertices[vid]), nrm[vid], balance(solid, scene))
+    shown = shown_by_cup(scene, to_model(solid, solid.vertices[vid]), nrm[vid], weight)
     vertex_rgb[vid[shown]] = np.asarray(mirror_rgb, np.uint8)

@@ -115,6 +115,14 @@ def test_a_2_to_1_picture_keeps_its_aspect_through_design_and_export(tmp_path: P
                         options=FabOptions(texture_px=256))
     views = json.loads((res.out / "scene.json").read_text())["views"]
     assert views["reflected"]["extent"] == [1.0, 0.5] and views["direct"]["extent"] == [1.0, 1.0]
+    # verify scores the 2:1 picture's rectangle: half the square's rows, and the saucer fills it
+    pytest.importorskip("mitsuba")
+    from saucerfab.verify import EyeSpec, verify_print
+
+    scores = {v.view: v for v in verify_print(res.out, eyes=EyeSpec("design"), res=48, spp=4,
+                                              all_formats=False).files[0].views}
+    assert scores["reflected"].pixels <= 0.5 * 48 * 48 < scores["direct"].pixels
+    assert scores["reflected"].coverage > 0.9
 
 
 def test_crop_of_an_empty_picture_or_with_a_mask_file_is_refused_before_any_work(tmp_path: Path) -> None:
