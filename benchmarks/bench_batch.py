@@ -55,7 +55,7 @@ def cpu_seconds() -> float:
 def make_manifest(folder: Path, jobs: int, raw: int, texture_px: int) -> Path:
     import importlib.util
 
-    from saucerfab.design import save_design, synthetic_design
+    from saucerfab.model.design_folder import save_design, synthetic_design
 
     spec = importlib.util.spec_from_file_location("mbs", ROOT / "samples/batch/make_batch_samples.py")
     assert spec and spec.loader

@@ -191,7 +191,7 @@ def main() -> None:
     table = "\n".join(lines)
     print(table)
     if args.out:
-        from saucerfab.fileio import write_text_atomic
+        from saucerfab.files.fileio import write_text_atomic
 
         write_text_atomic(args.out, f"Machine: {info}\n\nCommand: `.venv/bin/python benchmarks/bench_check.py "
                                     f"--runs {args.runs}`\n\n{table}\n")

@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 import conformance as cf  # noqa: E402 - found through the path above
 from bench_check_hostile import machine, uptime  # noqa: E402
 
-from saucerfab.fileio import write_text_atomic  # noqa: E402
+from saucerfab.files.fileio import write_text_atomic  # noqa: E402
 
 README = ROOT / "saucerfab" / "check" / "README.md"
 BEGIN, END = "<!-- conformance:begin -->", "<!-- conformance:end -->"

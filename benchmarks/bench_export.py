@@ -33,7 +33,8 @@ import numpy as np
 
 
 def bench_design(n: int):  # -> Design
-    from saucerfab.design import FaceView, synthetic_design
+    from saucerfab.model.design import FaceView
+    from saucerfab.model.design_folder import synthetic_design
 
     d = synthetic_design(resolution=n, shape="waves", texture_size=64, seed=0)
     rng = np.random.default_rng(0)
@@ -77,8 +78,8 @@ def main() -> None:
 
     from saucerfab.fabricate.options import FabOptions
     from saucerfab.fabricate.pipeline import export_design
-    from saucerfab.formats import FORMATS
-    from saucerfab.profiles import load_profile
+    from saucerfab.files.formats import FORMATS
+    from saucerfab.model.profiles import load_profile
     from saucerfab.fabricate.solid import build_solid
 
     design = bench_design(args.n)

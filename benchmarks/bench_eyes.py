@@ -136,8 +136,8 @@ def decal_scores(design_dir: Path, renders: dict, res: int, max_shift: int = 2) 
 
     Returns ``"view/eye"`` -> ``{"psnr_db", "shift_px"}``.
     """
-    from saucerfab.design import load_design
-    from saucerfab.eyes import EyeSpec
+    from saucerfab.model.design_folder import load_design
+    from saucerfab.model.eyes import EyeSpec
     from saucerfab.optimize.viewpoints import decal_height, decal_images, eye_rigs
     from saucerfab.verify.metrics import best_shift
 

@@ -82,13 +82,13 @@ def child(extra: list[str]) -> None:
     lap("CLI imports + parser")
     import saucerfab.render  # noqa: F401 - as the CLI: before torch (saucerfab/__init__.py's OpenMP settings)
     from saucerfab.cli.design import given_options
-    from saucerfab.fileio import write_bytes_atomic
-    from saucerfab.imageio import png_bytes
+    from saucerfab.files.fileio import write_bytes_atomic
+    from saucerfab.files.imageio import png_bytes
     from saucerfab.optimize.looks import LOOK_PNG_LEVEL, look_colors, look_images
     from saucerfab.optimize.prepare import prepare
     from saucerfab.optimize.request import DesignRequest
     from saucerfab.optimize.views import ViewMeshes
-    from saucerfab.report import as_uint8_rgb
+    from saucerfab.imaging.panels import as_uint8_rgb
 
     req = DesignRequest(**given_options(args))
     prep = prepare(req)

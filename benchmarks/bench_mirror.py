@@ -1,7 +1,7 @@
-"""Benchmark: reflecting every saucer vertex in the mirror cup (saucerfab.mirror.reflect).
+"""Benchmark: reflecting every saucer vertex in the mirror cup (saucerfab.model.mirror.reflect).
 
 For a circle, an ellipse and a hexagonal prism at the paper's 150 x 150 grid,
-times the vectorised :func:`saucerfab.mirror.reflect` (best of several runs)
+times the vectorised :func:`saucerfab.model.mirror.reflect` (best of several runs)
 against the plain per-vertex Python loop :func:`reflect_point_reference`
 (scalar bisection, or a plane mirror per facet) run on an evenly spread
 subset and scaled up to the whole grid. Also times Eberly's quartic for the
@@ -25,9 +25,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from saucerfab import mirror  # noqa: E402
-from saucerfab.heightfield import make_grid  # noqa: E402
-from saucerfab.scene import CircleCup, EllipseCup, PrismCup, Scene  # noqa: E402
+from saucerfab.model import mirror  # noqa: E402
+from saucerfab.model.heightfield import make_grid  # noqa: E402
+from saucerfab.model.cups import CircleCup, EllipseCup, PrismCup
+from saucerfab.model.scene import Scene  # noqa: E402
 
 
 def machine() -> str:
@@ -114,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(table)
     if args.write:
-        from saucerfab.fileio import write_text_atomic
+        from saucerfab.files.fileio import write_text_atomic
 
         text = (
             "# Mirror reflection benchmark\n\n"

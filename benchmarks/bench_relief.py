@@ -29,10 +29,10 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_design import machine  # noqa: E402
 
-from saucerfab import relief  # noqa: E402
-from saucerfab.heightfield import base_shape  # noqa: E402
+from saucerfab.model import relief  # noqa: E402
+from saucerfab.model.heightfield import base_shape  # noqa: E402
 from saucerfab.optimize.printable import CrestProjection, print_target  # noqa: E402
-from saucerfab.scene import paper_scene  # noqa: E402
+from saucerfab.model.scene import paper_scene  # noqa: E402
 
 
 def trial(share: float, seed: int = 0) -> tuple[CrestProjection, np.ndarray]:

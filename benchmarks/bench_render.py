@@ -7,7 +7,7 @@ float32, requires grad) -> direct-view vertices and reflected-view vertices
 the heights and the colours. Timed for the numba backend and, on the same work
 in the same run, the straightforward torch backend, at sigma 1e-5 and 1e-7.
 
-The reflected view is the real one: ``saucerfab.mirror.reflect`` gives the
+The reflected view is the real one: ``saucerfab.model.mirror.reflect`` gives the
 virtual points R = (r_x, r_y, h) of every saucer vertex in the cup (fixed xy,
 height h) and ``reflected_mesh`` the faces that reflect validly at the
 starting heights; their colours are the saucer faces' colours.
@@ -35,10 +35,10 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from saucerfab.heightfield import base_shape, make_grid, triangulate  # noqa: E402
+from saucerfab.model.heightfield import base_shape, make_grid, triangulate  # noqa: E402
 from saucerfab.render import Camera, soft_rasterize  # noqa: E402
 from saucerfab.render.soft_torch import count_candidate_pairs  # noqa: E402
-from saucerfab.scene import Scene  # noqa: E402
+from saucerfab.model.scene import Scene  # noqa: E402
 
 def build_problem(dtype: torch.dtype = torch.float32):  # type: ignore[no-untyped-def]
     """The paper's setup.
@@ -49,7 +49,7 @@ def build_problem(dtype: torch.dtype = torch.float32):  # type: ignore[no-untype
     the saucer faces, for their colours, None for all of them), the per-face
     colours and a note on the reflected geometry.
     """
-    from saucerfab.mirror import reflect, reflected_mesh
+    from saucerfab.model.mirror import reflect, reflected_mesh
 
     scene = Scene()
     n = scene.saucer.resolution
@@ -65,7 +65,7 @@ def build_problem(dtype: torch.dtype = torch.float32):  # type: ignore[no-untype
     cam_d, cam_r = Camera.from_scene(scene, "direct"), Camera.from_scene(scene, "reflected")
     n_refl = sum(int(f.shape[0]) for _, f, _ in parts)
     note = (
-        f"saucerfab.mirror.reflect in the paper's circular cup: {n_refl:,} of the "
+        f"saucerfab.model.mirror.reflect in the paper's circular cup: {n_refl:,} of the "
         f"{faces.shape[0]:,} faces reflect validly"
     )
 

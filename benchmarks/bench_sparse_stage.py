@@ -32,8 +32,8 @@ import saucerfab  # noqa: E402, F401 - before torch: its OpenMP wait settings (s
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from saucerfab.design import Design  # noqa: E402
-from saucerfab.heightfield import laplacian  # noqa: E402
+from saucerfab.model.design import Design  # noqa: E402
+from saucerfab.model.heightfield import laplacian  # noqa: E402
 from saucerfab.optimize.energies import DeformEnergy, barrier_floor, e_barrier, e_visual  # noqa: E402
 from saucerfab.optimize.prepare import prepare  # noqa: E402
 from saucerfab.optimize.previews import final_visual_error  # noqa: E402

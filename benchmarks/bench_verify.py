@@ -88,7 +88,7 @@ def every_printer(design: Path, tmp: Path) -> dict[str, dict]:
     import contextlib
     import io
 
-    from saucerfab.profiles import list_profiles
+    from saucerfab.model.profiles import list_profiles
 
     out: dict[str, dict] = {}
     for key in list_profiles():

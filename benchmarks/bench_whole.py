@@ -88,13 +88,13 @@ def wide_pairs(folder: Path) -> dict[str, tuple[str, str]]:
     return wide
 
 
-def direct_width_share(scene) -> float:  # noqa: ANN001 (a saucerfab.scene.Scene)
+def direct_width_share(scene) -> float:  # noqa: ANN001 (a saucerfab.model.scene.Scene)
     """The direct picture's width over the saucer's visible width, along the picture's middle row (design eye).
 
     The saucer's footprint (at height 0) is projected into the direct camera; its image is cut by the
     row ``y_ndc = 0`` (the picture's middle); the picture spans ``2 * extent[0]`` of the NDC width.
     """
-    from saucerfab.render.camera import Camera
+    from saucerfab.model.camera import Camera
 
     cam = Camera.from_scene(scene, "direct")
     (x0, x1), (y0, y1) = scene.saucer.x_range, scene.saucer.y_range

@@ -32,16 +32,16 @@ from saucerfab.errors import SaucerfabError  # noqa: E402
 #: never loads torch. The README's "Python API" example uses them; tests/test_api.py runs it.
 _API = {
     "DesignRequest": "saucerfab.optimize.request",
-    "run_design": "saucerfab.optimize.pipeline",
-    "load_design": "saucerfab.design",
-    "Design": "saucerfab.design",
+    "run_design": "saucerfab.workflow",
+    "load_design": "saucerfab.model.design_folder",
+    "Design": "saucerfab.model.design",
     "FabOptions": "saucerfab.fabricate.options",
     "export_design": "saucerfab.fabricate.pipeline",
     "ExportResult": "saucerfab.fabricate.pipeline",
     "verify_print": "saucerfab.verify.core",
     "check_mesh": "saucerfab.check",
-    "load_profile": "saucerfab.profiles",
-    "parse_eyes": "saucerfab.eyes",
+    "load_profile": "saucerfab.model.profiles",
+    "parse_eyes": "saucerfab.model.eyes",
 }
 
 __all__ = ["SaucerfabError", "__version__", *_API]

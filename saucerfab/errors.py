@@ -41,6 +41,10 @@ class DesignError(InputFileError):
     """A design folder is missing, incomplete or from an incompatible schema."""
 
 
+class SceneFileError(InputFileError):
+    """A ``scene.json`` (schema ``saucerfab.scene/1``) is unreadable, too large, not JSON or holds a bad value."""
+
+
 class MeshError(SaucerfabError):
     """A mesh could not be built or is not printable."""
 

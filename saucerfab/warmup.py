@@ -30,7 +30,7 @@ def warm_up(*, check: bool = True) -> list[str]:
     from saucerfab.fabricate.kernels import warm_up as fab_warm_up
 
     done += [f"fabricate.{k}" for k in fab_warm_up()]
-    from saucerfab.relief import blunt_thin_crests
+    from saucerfab.model.relief import blunt_thin_crests
 
     spike = np.zeros((5, 5))
     spike[2, 2] = 3.0

@@ -17,7 +17,7 @@ import math
 
 import torch
 
-from saucerfab.render.camera import Camera
+from saucerfab.model.camera import Camera
 
 
 def _p2f_distance(w: torch.Tensor, xp: torch.Tensor, yp: torch.Tensor, f: torch.Tensor):

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from saucerfab.cli import main as cli
-from saucerfab.profiles import list_profiles
+from saucerfab.model.profiles import list_profiles
 from saucerfab.samples import DEMO_PAIR, PAIRS, pair_paths
 
 SMALL = ["--resolution", "40", "--image-size", "96", "--max-iters", "25"]

@@ -12,7 +12,7 @@ import pytest
 import saucerfab.optimize.pipeline as pipeline
 from saucerfab.cli import main
 from saucerfab.errors import OutputError
-from saucerfab.fileio import write_bytes_atomic
+from saucerfab.files.fileio import write_bytes_atomic
 from saucerfab.optimize.request import DesignRequest
 
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"
@@ -43,7 +43,7 @@ def test_a_full_disk_at_the_end_keeps_the_work_and_says_where(
 
     monkeypatch.setattr(pipeline, "save_design", full_disk)
     with pytest.raises(OutputError) as exc:
-        pipeline.run_design(req, out, progress=lambda *a: None)
+        pipeline.optimize_design(req, out, progress=lambda *a: None)
     msg = str(exc.value)
     assert "No space left on device" in msg and str(out) in msg and ".des.checkpoint" in msg
     assert not out.exists()
@@ -51,7 +51,7 @@ def test_a_full_disk_at_the_end_keeps_the_work_and_says_where(
     # with space again, the same request finishes from the checkpoint without optimising
     monkeypatch.setattr(pipeline, "save_design", real_save)
     stages_run: list[str] = []
-    pipeline.run_design(req, out, progress=lambda stage, *a: stages_run.append(stage))
+    pipeline.optimize_design(req, out, progress=lambda stage, *a: stages_run.append(stage))
     assert (out / "design.json").is_file() and not (tmp_path / ".des.checkpoint").exists()
     assert stages_run == []  # no stage ran again
     # the CLI says it as an error with exit 2, not a traceback

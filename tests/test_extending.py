@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -29,9 +29,9 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 import pytest
 
-from saucerfab import cups
-from saucerfab.reflection import reference_facets, reflect_facets
-from saucerfab.validate import check_positive
+from saucerfab.model import cups
+from saucerfab.model.reflection import reference_facets, reflect_facets
+from saucerfab.model.validate import check_positive
 
 PACKAGE = Path(__file__).resolve().parents[1] / "saucerfab"
 SAMPLES = PACKAGE.parent / "samples"
@@ -103,10 +103,11 @@ def test_a_cup_shape_is_one_class_in_the_table(monkeypatch: pytest.MonkeyPatch, 
     from dataclasses import replace
 
     from saucerfab.fabricate.scene_json import viewing_dict
-    from saucerfab.mirror import reflect, reflect_point_reference
-    from saucerfab.scene import load_scene, paper_scene, parse_cup_spec, scene_to_toml
+    from saucerfab.model.cups import parse_cup_spec
+    from saucerfab.model.mirror import reflect, reflect_point_reference
+    from saucerfab.model.scene import load_scene, paper_scene, scene_to_toml
+    from saucerfab.pages.viewer import _cup_wall
     from saucerfab.verify.printfolder import load_print_scene
-    from saucerfab.viewer import _cup_wall
 
     monkeypatch.setitem(cups.CUP_CLASSES, "rectangle", RectangleCup)
     cup = parse_cup_spec("rectangle:0.8,0.5")
@@ -135,7 +136,7 @@ def test_a_cup_shape_is_one_class_in_the_table(monkeypatch: pytest.MonkeyPatch, 
     (tmp_path / "scene.json").write_text(json.dumps(doc))
     back = load_print_scene(tmp_path)
     assert back.cup.shape == "rectangle" and back.cup.width_mm == pytest.approx(doc["cup"]["width"])
-    assert _cup_wall(doc["cup"]).shape == (4, 2, 4)
+    assert _cup_wall(back.cup).shape == (4, 2, 4)
 
 
 # --------------------------------------------------------------------------- a file format and an energy term
@@ -204,13 +205,13 @@ def test_a_file_format_is_one_row_and_its_own_modules(tmp_path: Path) -> None:
     (root / "saucerfab" / "fabricate" / "export_off.py").write_text(OFF_WRITER)
     (root / "saucerfab" / "check" / "readers" / "off.py").write_text(OFF_READER)
     _edit(
-        root / "saucerfab" / "formats.py",
+        root / "saucerfab" / "files" / "formats.py",
         '    Format("stl", "STL",',
         '    Format("off", "OFF", "Object File Format, no colour", (".off",),\n'
         '           writer=f"{_FAB}.export_off:write_off", reader=f"{_READ}.off:read_off", magic=(b"OFF",)),\n'
         '    Format("stl", "STL",',
     )
-    assert _changed(root) == {"formats.py"}
+    assert _changed(root) == {"files/formats.py"}
     out = _run(root, """
 import numpy as np
 from pathlib import Path
@@ -218,7 +219,7 @@ from saucerfab.check import check_mesh
 from saucerfab.cli import main
 from saucerfab.fabricate.registry import render
 from saucerfab.fabricate.textured import TexturedMesh
-from saucerfab.imageio import png_bytes
+from saucerfab.files.imageio import png_bytes
 v = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 10]], float)
 f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
 mesh = TexturedMesh(name="tet", vertices=v, faces=f, uvs=np.zeros((1, 2)), face_uvs=np.zeros((4, 3), np.int64),

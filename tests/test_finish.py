@@ -21,11 +21,11 @@ from types import SimpleNamespace
 import pytest
 
 from saucerfab.check.limits import DEFAULT_LIMITS, Limits
-from saucerfab.design import synthetic_design
 from saucerfab.errors import ExportError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.pipeline import ExportResult, export_design
 from saucerfab.fabricate.registry import OTHER_FORMATS_DIR
+from saucerfab.model.design_folder import synthetic_design
 from saucerfab.workflow import CheckedFile, PrintResult, export_limits, finish_print, meshes_to_check
 
 OBJ_ZIP = {"saucer.obj": b"mtllib saucer.mtl\nv 0 0 0\n", "saucer.mtl": b"newmtl m\n", "saucer.png": b"\x89PNG"}

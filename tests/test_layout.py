@@ -120,21 +120,36 @@ def test_no_module_too_long() -> None:
     assert not long, f"modules over {MAX_MODULE_LINES} lines (split along what they do): {long}"
 
 
-#: the rooms above the stages, top first (issue 41): the front doors (the commands, the batch, the studio,
-#: the demo), then the workflow that owns design -> export -> check -> verify -> report once; every other
-#: module is a stage or a helper below them (fabricate, check, verify, report_page, optimize, ...)
+#: the floor plan, top first (issue 41): the front doors (the commands, the batch, the studio, the demo, the
+#: numba warm-up); the workflow that owns design -> export -> check -> verify -> report once; the pages
+#: (report.html, the 3D viewer, people's words); the stages (the optimizer, the export, the checker, verify,
+#: the rasterizers); imaging (pictures in and previews out); the domain model (scene, cups, eyes, printer
+#: profiles, heightfields, reflection, relief, the design); the file helpers. A module imports only its own
+#: room and the rooms below it. The package's face (``saucerfab/__init__.py``), ``errors`` and ``extras``
+#: are the ground every room stands on.
 ROOMS = (
-    ("saucerfab.cli", "saucerfab.batch", "saucerfab.studio", "saucerfab.demo", "saucerfab.__main__"),
+    ("saucerfab.cli", "saucerfab.batch", "saucerfab.studio", "saucerfab.demo", "saucerfab.__main__",
+     "saucerfab.warmup"),
     ("saucerfab.workflow",),
+    ("saucerfab.pages",),
+    ("saucerfab.optimize", "saucerfab.fabricate", "saucerfab.check", "saucerfab.verify", "saucerfab.render"),
+    ("saucerfab.imaging",),
+    ("saucerfab.model",),
+    ("saucerfab.files",),
 )
+
+#: the modules that stand on the ground, below every room
+GROUND = ("saucerfab", "saucerfab.errors", "saucerfab.extras", "saucerfab.samples")
 
 
 def floor(module: str) -> int:
-    """How high ``module``'s room is: 0 for a stage or helper, one more for each room of :data:`ROOMS` below the top."""
+    """How high ``module``'s room is: 0 on the ground, one more for each room of :data:`ROOMS` below it."""
     for i, room in enumerate(ROOMS):
         if any(module == r or module.startswith(r + ".") for r in room):
             return len(ROOMS) - i
-    return 0
+    if module in GROUND:
+        return 0
+    raise AssertionError(f"{module} stands in no room of the floor plan: put it in one (tests/test_layout.py ROOMS)")
 
 
 def upward_imports(graph: dict[str, set[str]]) -> list[str]:
@@ -152,8 +167,23 @@ def test_the_upward_finder_finds_a_stage_importing_the_workflow() -> None:
                                      "saucerfab.workflow -> saucerfab.cli.export"]
 
 
+def test_every_module_stands_in_a_room() -> None:
+    """The top level holds the ground and the front doors only: a new module goes into a room."""
+    for module in _modules():
+        floor(module)  # raises for a module outside the plan
+    top = sorted(p.stem for p in PACKAGE.glob("*.py"))
+    assert top == ["__init__", "__main__", "demo", "errors", "extras", "samples", "warmup"], top
+
+
+def test_the_upward_finder_finds_the_model_importing_a_stage() -> None:
+    graph = {"saucerfab.model.mirror": {"saucerfab.render.camera", "saucerfab.files.fileio"},
+             "saucerfab.pages.labels": {"saucerfab.optimize.stages"}, "saucerfab.optimize.x": {"saucerfab.pages.y"}}
+    assert upward_imports(graph) == ["saucerfab.model.mirror -> saucerfab.render.camera",
+                                     "saucerfab.optimize.x -> saucerfab.pages.y"]
+
+
 def test_no_upward_imports_between_the_rooms() -> None:
-    """The stages never import the workflow, the workflow never imports a front door."""
+    """No room imports a room above it: the stages never import the pages or the workflow, the model no stage."""
     found = upward_imports(import_graph())
     assert not found, ("imports of a higher room (move what both need down into the lower room, or let the "
                        "front door pass it in): " + "; ".join(found))

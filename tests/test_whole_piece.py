@@ -9,9 +9,9 @@ import pytest
 
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.pipeline import export_design
-from saucerfab.optimize.pipeline import run_design
 from saucerfab.optimize.request import DesignRequest
 from saucerfab.samples import DEMO_PAIR, pair_paths
+from saucerfab.workflow import run_design
 
 pytest.importorskip("mitsuba")
 pytest.importorskip("torch")
@@ -24,7 +24,7 @@ def whole_view(tmp: Path, name: str, **options: object):  # noqa: ANN201
 
     direct, reflected = pair_paths(DEMO_PAIR)
     folder = run_design(DesignRequest(direct=direct, reflected=reflected, **SMALL, **options), tmp / name,
-                        progress=lambda *a: None)
+                        progress=lambda *a: None).folder
     export_design(folder, tmp / f"{name}-print", printer="j55", cup_diameter_mm=80, formats=["obj"],
                   options=FabOptions(texture_px=512))
     result = verify_print(tmp / f"{name}-print", eyes=EyeSpec("design"), res=96, spp=16, all_formats=False)

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from saucerfab.design import save_design, synthetic_design
 from saucerfab.fabricate.options import FabOptions
+from saucerfab.model.design_folder import save_design, synthetic_design
 from saucerfab.workflow import STAGES, CheckedFile, PrintResult, make_print
 
 PACKAGE = Path(__file__).resolve().parents[1] / "saucerfab"
@@ -25,7 +25,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "saucerfab"
 FRONT_DOORS = ("cli", "batch", "studio", "demo.py")
 
 #: the stages of the sequence (and the old module that chained them) a front door must not call itself
-STAGE_CALLS = frozenset({"export_design", "check_mesh", "verify_print", "finish_print", "meshes_to_check"})
+STAGE_CALLS = frozenset({"optimize_design", "design_report", "export_design", "check_mesh", "verify_print", "finish_print",
+                         "meshes_to_check"})
 STAGE_MODULES = frozenset({"saucerfab.finish"})
 
 #: uses allowed, each with its reason: ``saucerfab verify`` is the verify stage's own command (a full verify
@@ -65,9 +66,11 @@ def test_the_scan_finds_a_door_that_calls_the_stages_itself() -> None:
         "    import saucerfab.verify as v\n"
         "    v.verify_print('x')\n"
         "    from saucerfab import finish\n"
+        "    from saucerfab.optimize.pipeline import optimize_design\n"
     )
-    assert sorted(stage_uses(source)) == ["check_mesh", "export_design", "saucerfab.finish", "verify_print"]
-    assert stage_uses("from saucerfab.workflow import make_print, verify_design\n") == []
+    assert sorted(stage_uses(source)) == ["check_mesh", "export_design", "optimize_design", "saucerfab.finish",
+                                          "verify_print"]
+    assert stage_uses("from saucerfab.workflow import make_print, run_design, verify_design\n") == []
 
 
 def test_no_front_door_calls_a_stage_of_the_sequence_itself() -> None:
@@ -78,7 +81,7 @@ def test_no_front_door_calls_a_stage_of_the_sequence_itself() -> None:
         rel = path.relative_to(PACKAGE).as_posix()
         found += [f"{rel}: {use}" for use in stage_uses(path.read_text(encoding="utf-8")) if (rel, use) not in ALLOWED]
     assert not found, ("front doors calling a stage of design -> export -> check -> verify -> report themselves "
-                       "(call saucerfab.workflow's make_print / finish_print / verify_design instead): "
+                       "(call saucerfab.workflow's run_design / make_print / finish_print / verify_design instead): "
                        + "; ".join(found))
 
 
@@ -112,3 +115,29 @@ def test_make_print_leaves_check_json_out_where_asked(design_dir: Path, tmp_path
     assert [c.name for c in done.checks] == ["saucer.zip/saucer.obj"]  # the zip's mesh, as the bureau unpacks it
     assert not (tmp_path / "print" / "check.json").exists()
     assert [p.name for p in tmp_path.iterdir()] == ["print"]  # the unpacked zip went from the scratch folder
+
+
+def test_the_trial_verify_of_a_design_is_for_the_printer_it_was_made_for(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """verify_design(design) without a printer uses the design's own (its intent), as export does."""
+    import saucerfab.fabricate.pipeline as fab
+    from saucerfab.errors import ExportError
+    from saucerfab.model.design_folder import load_design
+    from saucerfab.workflow import verify_design
+
+    asked: list[str] = []
+
+    def stop(design: object, out: object, *, printer: object = None, **kw: object) -> None:
+        asked.append(printer.key)  # type: ignore[attr-defined]
+        raise ExportError("stopped by the test")
+
+    monkeypatch.setattr(fab, "export_design", stop)
+    made = synthetic_design(resolution=12, texture_size=32)
+    made.parameters["printer"] = "hp_jf580"
+    design = load_design(save_design(made, tmp_path / "design"))
+    for given, expected in ((None, "hp_jf580"), ("j850", "j850")):
+        with pytest.raises(ExportError, match="stopped by the test"):
+            verify_design(design, printer=given)
+        assert asked.pop() == expected
+    with pytest.raises(ExportError, match="with its folder"):
+        verify_design(made)  # a design only in memory has no folder to write the verify into

@@ -14,17 +14,18 @@ from pathlib import Path
 import numpy as np
 from verify_reference import _bilinear
 
-from saucerfab.design import Design, synthetic_design
-from saucerfab.heightfield import make_grid
-from saucerfab.render.camera import Camera
+from saucerfab.model.camera import Camera
+from saucerfab.model.design import Design
+from saucerfab.model.design_folder import synthetic_design
+from saucerfab.model.heightfield import make_grid
 
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 
 
 def picture(name: str, size: int) -> np.ndarray:
     """A bundled sample fitted into a square of ``size`` px, transparency over white, float in [0, 1]."""
-    from saucerfab.fitting import fit_square
-    from saucerfab.images import flatten_alpha, load_image
+    from saucerfab.imaging.fitting import fit_square
+    from saucerfab.imaging.images import flatten_alpha, load_image
 
     img = load_image(SAMPLES / name)
     rgb, alpha, _ = fit_square(img, size)

@@ -33,7 +33,7 @@ def _bilinear(tex: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def camera_frame(eye, target, angle_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """The camera of :mod:`saucerfab.render.camera`: a look-at from ``eye`` to ``target`` with z up.
+    """The camera of :mod:`saucerfab.model.camera`: a look-at from ``eye`` to ``target`` with z up.
 
     Returns:
         forward, right, up (unit, (3,) each) and ``tan(angle_deg)``, the

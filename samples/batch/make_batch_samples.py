@@ -8,7 +8,7 @@ Writes, under ``samples/batch/``:
   and ``images/broken.png``, a PNG cut off halfway (the deliberately bad job);
 * ``shapes/dome.npy`` a base-shape heightfield file (32 x 32 float64);
 * ``scenes/small_cup.toml`` a scene with a 60 mm cup (a scene file input);
-* ``designs/*/``     three small design folders (``saucerfab.design.synthetic_design``:
+* ``designs/*/``     three small design folders (``saucerfab.model.design_folder.synthetic_design``:
   a seeded shape and a colour checkerboard texture, made without the
   optimizer, 24 x 24 vertices) for the design-folder jobs.
 
@@ -99,7 +99,7 @@ cup_diameter_mm = 60.0
 
 
 def write(folder: Path) -> None:
-    from saucerfab.design import save_design, synthetic_design
+    from saucerfab.model.design_folder import save_design, synthetic_design
 
     for name, data in images().items():
         p = folder / "images" / name

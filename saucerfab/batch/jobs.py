@@ -41,7 +41,7 @@ from typing import Any
 from saucerfab import __version__
 from saucerfab.batch.manifest import JobSpec
 from saucerfab.errors import InputFileError, Interrupted, SaucerfabError
-from saucerfab.fileio import atomic_dir, sha256_file
+from saucerfab.files.fileio import atomic_dir, sha256_file
 from saucerfab.optimize.request import IMAGE_ROLES
 
 MARKER = "job.json"
@@ -233,7 +233,7 @@ def load_payload(
     Raises:
         SaucerfabError: an input is missing or unreadable, or the printer is unknown.
     """
-    from saucerfab.profiles import load_profile
+    from saucerfab.model.profiles import load_profile
 
     printer = job.printer
     try:
@@ -289,17 +289,17 @@ def load_payload(
 def design_printer(design_json: Any) -> str:
     """The printer (a profile key, never a path) a design was made for, from its design.json: ``parameters.printer``
     (as ``saucerfab design --printer`` was given), else ``parameters.print_target.printer``, else
-    :data:`~saucerfab.profiles.DEFAULT_PRINTER` (a synthetic design, one older than the print
+    :data:`~saucerfab.model.profiles.DEFAULT_PRINTER` (a synthetic design, one older than the print
     target, or an unreadable design.json: the export then says what is wrong with the folder).
 
     The printer a job with a design folder and no ``printer`` exports for: the rule of
     ``saucerfab export`` without ``--printer`` (``saucerfab.fabricate.pipeline.export_printer``),
     read from design.json alone, since the driver does not load a job's design.
     """
-    from saucerfab.fabricate.pipeline import printer_made_for
-    from saucerfab.profiles import DEFAULT_PRINTER
+    from saucerfab.model.design import Intent
+    from saucerfab.model.profiles import DEFAULT_PRINTER
 
-    made = printer_made_for(design_json.get("parameters") if isinstance(design_json, dict) else None)
+    made = Intent.of(design_json.get("parameters") if isinstance(design_json, dict) else None).printer
     return DEFAULT_PRINTER if made is None else made
 
 
@@ -387,8 +387,8 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
     if payload.kind == "raw":
         stage[0] = "design"
         _emit(payload, "design")
-        from saucerfab.optimize.pipeline import run_design
         from saucerfab.optimize.request import DesignRequest
+        from saucerfab.workflow import run_design
 
         kw = dict(payload.request)
         for role in IMAGE_ROLES:
@@ -407,7 +407,7 @@ def _run_stages(payload: Payload, work: Path, times: dict[str, float], stage: li
         request = DesignRequest(**kw)
         with _DESIGN_LOCK, _torch_threads(payload.threads):
             t = time.perf_counter()
-            design_dir = Path(run_design(request, out / "design", progress=progress))
+            design_dir = run_design(request, out / "design", progress=progress).folder
             times["design"] = time.perf_counter() - t
         files.update(_collect(design_dir, "design"))
     else:

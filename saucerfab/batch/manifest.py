@@ -64,10 +64,10 @@ from pathlib import Path
 from typing import Any
 
 from saucerfab.batch.manifest_lines import (
+    MAX_NESTING,
     Problems,
     Report,
     Row,
-    MAX_NESTING,
     TomlLines,
     csv_records,
     input_problem,
@@ -232,8 +232,8 @@ def _build_job(
     does not hide the next); the job is None when there was any.
     ``printer_problem`` judges a printer key (cached per manifest).
     """
-    from saucerfab.formats import FORMATS, WRITERS, lookup
-    from saucerfab.scene import PRESETS
+    from saucerfab.files.formats import FORMATS, WRITERS, lookup
+    from saucerfab.model.scene import PRESETS
 
     found: list[str] = []
 
@@ -353,7 +353,7 @@ def _build_job(
         if (path := inside("shape", shape)) is not None:
             files["shape"] = path
     else:
-        from saucerfab.heightfield import BASE_SHAPES
+        from saucerfab.model.heightfield import BASE_SHAPES
 
         shape_name = shape
         if shape.replace("-", "_").lower() not in BASE_SHAPES:
@@ -372,23 +372,18 @@ def _build_job(
         bad("cup", f"'cup' must be a cup spec like 'circle:0.4', got {cup!r}")
         cup = None
     elif cup is not None:
-        from saucerfab.scene import parse_cup_spec
+        from saucerfab.model.cups import parse_cup_spec
 
         try:
             parse_cup_spec(cup)
         except ConfigError as exc:
             bad("cup", str(exc))
             cup = None
-    allowed = design_option_keys()
-    unknown_opts = set(design_options) - allowed
-    if unknown_opts:
-        bad("design_options", f"unknown design option(s) {sorted(unknown_opts)}; allowed: {sorted(allowed)}")
-    else:
-        try:  # placeholders for images with a problem of their own: only the options are judged here
-            images = {k: files.get(k, Path(k)) for k in ("direct", "reflected")}
-            _check_design_options(design_options, images, scene_name, cup)
-        except ConfigError as exc:
-            bad("design_options", str(exc))
+    try:  # placeholders for images with a problem of their own: only the options are judged here
+        images = {k: files.get(k, Path(k)) for k in ("direct", "reflected")}
+        _check_design_options(design_options, images, scene_name, cup)
+    except ConfigError as exc:
+        bad("design_options", str(exc))
     if found:
         return None
     return JobSpec(
@@ -401,52 +396,17 @@ def _build_job(
     )
 
 
-def _type_problem(value: Any, hint: Any) -> str | None:
-    """Why ``value`` does not fit the type annotation ``hint``, or None when it does.
-
-    Covers the annotations of :class:`~saucerfab.optimize.request.DesignRequest`'s
-    option fields (``int``, ``float``, ``str``, ``bool``, ``X | None``); TOML and
-    CSV values are plain, so nothing more is needed. An int is a float
-    (``height_scale = 1``); a bool is neither (Python's bool is an int).
-    """
-    import types
-    import typing
-
-    origin = typing.get_origin(hint)
-    if origin in (typing.Union, types.UnionType):
-        args = typing.get_args(hint)
-        if value is None and type(None) in args:
-            return None
-        problems = [_type_problem(value, a) for a in args if a is not type(None)]
-        return None if any(p is None for p in problems) else " or ".join(p for p in problems if p)
-    if hint is bool:
-        return None if isinstance(value, bool) else "true or false"
-    if hint is int:
-        return None if isinstance(value, int) and not isinstance(value, bool) else "a whole number"
-    if hint is float:
-        return None if isinstance(value, (int, float)) and not isinstance(value, bool) else "a number"
-    if hint is str:
-        return None if isinstance(value, str) else "a string"
-    return None  # an annotation this check does not know: the request's own checks judge the value
-
-
-@functools.lru_cache(maxsize=1)
-def _request_hints() -> dict[str, Any]:
-    """:class:`DesignRequest`'s field annotations, evaluated once (get_type_hints is slow)."""
-    import typing
-
-    return typing.get_type_hints(DesignRequest)
-
-
 def _check_design_options(
     options: dict[str, Any], files: dict[str, Path], scene: str | None, cup: str | None
 ) -> None:
-    """Refuse, at load, every design option value ``saucerfab design`` would refuse before its work.
+    """Refuse, at load, every design option ``saucerfab design`` would refuse before its work.
 
-    The rules are the CLI's own, not copies: the option types are the
-    :class:`DesignRequest` field annotations (argparse's ``type=`` on the
-    command line), the value checks are ``DesignRequest``'s (with
-    :func:`~saucerfab.optimize.stages.check_weights`: a weight no stage uses), and the
+    The rules are the CLI's own, not copies: the option names are
+    :func:`design_option_keys`, their types the :class:`DesignRequest` field
+    annotations (argparse's ``type=`` on the command line) and the value checks
+    ``DesignRequest``'s (with :func:`~saucerfab.optimize.stages.check_weights`: a
+    weight no stage uses), all through :meth:`DesignRequest.from_options` (the
+    studio's form goes through it too); the
     resolution and image-size ranges are those of the scene the run builds
     (:func:`~saucerfab.optimize.prepare.build_scene`, as the design's
     ``prepare`` does). A job with a scene *file* has its overrides checked on
@@ -455,24 +415,19 @@ def _check_design_options(
     input, read when the job runs, not when the manifest loads.
 
     Raises:
-        ConfigError: ``design_options: ...``, every mistyped option at once, else the first refused value.
+        ConfigError: ``unknown design option(s) [...]; allowed: [...]``, else
+            ``design_options: ...``: every mistyped option at once, else the first refused value.
     """
     from saucerfab.errors import SaucerfabError
-    from saucerfab.heightfield import check_height_scale
-    hints = _request_hints()
-    mistyped = [
-        f"{name} must be {want}, got {value!r}"
-        for name, value in sorted(options.items())
-        if (want := _type_problem(value, hints.get(name))) is not None
-    ]
-    if mistyped:
-        raise ConfigError("design_options: " + "; ".join(mistyped))
+    from saucerfab.model.heightfield import check_height_scale
+
+    request = DesignRequest.from_options(
+        options, where="manifest", allowed=design_option_keys(),
+        inputs={"direct": files["direct"], "reflected": files["reflected"]},
+    )
     try:
-        request = DesignRequest(direct=files["direct"], reflected=files["reflected"], **options)
         check_height_scale(request.height_scale)
     except SaucerfabError as exc:
-        raise ConfigError(f"design_options: {exc}") from None
-    except TypeError as exc:
         raise ConfigError(f"design_options: {exc}") from None
     scene, cup = (scene, cup) if scene is not None else ("paper", None)
     try:
@@ -639,7 +594,7 @@ def load_manifest(path: str | os.PathLike[str]) -> Manifest:
             missing or leaving the manifest's folder, unknown printers, bad values.
     """
     from saucerfab.errors import SaucerfabError
-    from saucerfab.profiles import load_profile
+    from saucerfab.model.profiles import load_profile
 
     path = Path(path)
     suffix = path.suffix.lower()

@@ -38,7 +38,7 @@ from typing import Any
 
 from saucerfab import __version__
 from saucerfab.batch.manifest import HTML_NAME, JSON_NAME
-from saucerfab.fileio import write_text_atomic
+from saucerfab.files.fileio import write_text_atomic
 
 REPORT_SCHEMA = "saucerfab.batch-report/1"
 
@@ -195,8 +195,8 @@ def _job_row(j: dict[str, Any]) -> str:
 
 
 def report_html(data: dict[str, Any]) -> str:
-    """A self-contained HTML page for a report dict (no scripts, no outside files): :func:`saucerfab.report.html_report`."""
-    from saucerfab.report import Section, html_report
+    """A self-contained HTML page for a report dict (no scripts, no outside files): :func:`saucerfab.imaging.panels.html_report`."""
+    from saucerfab.pages.html import Section, html_report
 
     s = data["summary"]
     batch = {

@@ -47,7 +47,7 @@ from saucerfab.batch.report import (
     write_reports,
 )
 from saucerfab.errors import ConfigError, Interrupted, SaucerfabError
-from saucerfab.fileio import exclusive_lock
+from saucerfab.files.fileio import exclusive_lock
 
 #: how often a job may be started again after its worker process died under it
 MAX_ATTEMPTS = 2
@@ -58,7 +58,7 @@ def _locked(out: Path) -> Iterator[None]:
     """Hold an exclusive lock on ``out`` (one batch per output folder); freed even on kill -9.
 
     The lock file stays in ``out`` (which a batch never replaces); see
-    :func:`saucerfab.fileio.exclusive_lock`.
+    :func:`saucerfab.files.fileio.exclusive_lock`.
     """
 
     def busy() -> ConfigError:

@@ -45,7 +45,7 @@ from saucerfab.check.report import (
 from saucerfab.check.schema import JSON_SCHEMA, REPORT_SCHEMA
 
 if TYPE_CHECKING:
-    from saucerfab.profiles import PrinterProfile
+    from saucerfab.model.profiles import PrinterProfile
 
 __all__ = [
     "CODES", "JSON_SCHEMA", "REPORT_SCHEMA", "SCHEMA_ID", "Finding", "Limits", "Report",
@@ -56,7 +56,7 @@ __all__ = [
 def _profile(printer: PrinterProfile | str | os.PathLike[str] | None) -> PrinterProfile | None:
     if printer is None:
         return None
-    from saucerfab.profiles import PrinterProfile, load_profile
+    from saucerfab.model.profiles import PrinterProfile, load_profile
 
     if isinstance(printer, PrinterProfile):
         return printer

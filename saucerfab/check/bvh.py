@@ -29,7 +29,7 @@ FAST_FROM_TRIANGLES = 200_000
 
 def query_workers() -> int:
     """Threads for the numpy-heavy queries (rays, pair tests): the cores this process may use, at most 4."""
-    from saucerfab.machine import usable_cores
+    from saucerfab.files.machine import usable_cores
 
     return min(4, usable_cores())
 

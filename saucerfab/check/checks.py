@@ -39,7 +39,7 @@ from saucerfab.check.topology import face_geometry, topology, weld
 from saucerfab.check.walls import thin_walls
 
 if TYPE_CHECKING:
-    from saucerfab.profiles import PrinterProfile
+    from saucerfab.model.profiles import PrinterProfile
 
 #: coordinates beyond this many millimetres count as unusable (see run_checks)
 _ABSURD_MM = 1e9

@@ -17,7 +17,7 @@ from saucerfab.check.places import fmt_pt, where
 from saucerfab.check.report import Finding, finding
 
 if TYPE_CHECKING:
-    from saucerfab.profiles import PrinterProfile
+    from saucerfab.model.profiles import PrinterProfile
 
 _TEXTURE_CODES = {
     "missing": "texture_missing",

@@ -15,7 +15,7 @@ from saucerfab.check.meshdata import MeshData
 from saucerfab.check.report import Finding, finding
 
 if TYPE_CHECKING:
-    from saucerfab.profiles import PrinterProfile
+    from saucerfab.model.profiles import PrinterProfile
 
 
 def printer_file_checks(md: MeshData, profile: PrinterProfile | None, m: int, file_bytes: int,

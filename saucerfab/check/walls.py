@@ -16,7 +16,7 @@ from saucerfab.check.places import fmt_pt, where
 from saucerfab.check.report import Finding, finding
 
 if TYPE_CHECKING:
-    from saucerfab.profiles import PrinterProfile
+    from saucerfab.model.profiles import PrinterProfile
 
 
 def thin_walls(bvh: BVH, tri: np.ndarray, normals: np.ndarray, areas: np.ndarray, gidx: np.ndarray, diag: float,
@@ -111,7 +111,7 @@ def beside_thick(bvh: BVH, tri: np.ndarray, pts: np.ndarray, dirs: np.ndarray, t
     the thin spot is the edge or tip of thicker material: the top of a crest,
     a spike's tip, a sharp edge, which a printer rounds off by up to its
     resolution but cannot break, so it is relief, not a wall (the relief's
-    own rule is the minimum feature, which the export holds: saucerfab.relief).
+    own rule is the minimum feature, which the export holds: saucerfab.model.relief).
     A thin wall (a sheet, a fin, a needle) stays thin for more than
     ``required`` in every direction across it, and stays a wall.
 

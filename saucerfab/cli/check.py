@@ -18,7 +18,7 @@ import argparse
 import sys
 
 from saucerfab.cli.schema_flag import add_schema_flag, schema_asked
-from saucerfab.formats import READERS, labels
+from saucerfab.files.formats import READERS, labels
 
 HELP = f"check mesh files ({labels(READERS.values())}) for printability; exit 0/1/2"
 
@@ -78,7 +78,7 @@ def _zip_holds_a_mesh(path: object) -> bool:
     """
     import zipfile
 
-    from saucerfab.formats import SUFFIXES
+    from saucerfab.files.formats import SUFFIXES
 
     try:
         with zipfile.ZipFile(path) as zf:  # type: ignore[arg-type]
@@ -94,7 +94,7 @@ def _folder_meshes(folder: object) -> list[str]:
     """The mesh files directly in ``folder``, sorted: a reader's suffix, or a zip holding a mesh."""
     from pathlib import Path
 
-    from saucerfab.formats import SUFFIXES
+    from saucerfab.files.formats import SUFFIXES
 
     found = []
     for p in sorted(Path(folder).iterdir()):  # type: ignore[arg-type]
@@ -108,7 +108,7 @@ def expand_files(given: list[str]) -> list[str]:
     """The mesh files ``given`` names: files as they are, a folder's mesh files, a glob's matches; in order.
 
     A folder gives every file directly in it whose suffix a checker reader
-    takes (:data:`saucerfab.formats.SUFFIXES`), and every ``.zip`` whose
+    takes (:data:`saucerfab.files.formats.SUFFIXES`), and every ``.zip`` whose
     entries hold one (an OBJ zipped with its side files), sorted by name; not
     its subfolders (an export's print set is its top level). A name that does
     not exist and holds ``*``, ``?`` or ``[`` is a glob pattern: its matches,
@@ -122,7 +122,7 @@ def expand_files(given: list[str]) -> list[str]:
     from pathlib import Path
 
     from saucerfab.errors import ConfigError
-    from saucerfab.formats import SUFFIXES
+    from saucerfab.files.formats import SUFFIXES
 
     def one(name: str) -> list[str]:
         if not Path(name).is_dir():
@@ -158,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
     from saucerfab.check import JSON_SCHEMA, Limits, check_many, reports_to_json, reports_to_junit, summary_line
     from saucerfab.cli.outputs import refuse_existing
     from saucerfab.errors import ConfigError
-    from saucerfab.fileio import write_text_atomic
+    from saucerfab.files.fileio import write_text_atomic
 
     if schema_asked(args, JSON_SCHEMA, args.files, "give one or more mesh files to check (saucerfab check FILE...)"):
         return 0

@@ -6,6 +6,7 @@ import argparse
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from saucerfab.model.design import Design
     from saucerfab.optimize.looks import Look
 
 HELP = "optimize a saucer: direct + reflected image and a base shape -> design folder"
@@ -13,8 +14,10 @@ HELP = "optimize a saucer: direct + reflected image and a base shape -> design f
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options; every design option defaults to None ("not given") and its default is DesignRequest's."""
+    from saucerfab.model.cups import CUP_SPEC_USAGE
+    from saucerfab.model.eyes import DEFAULT_IPD_MM
+    from saucerfab.model.scene import paper_scene
     from saucerfab.optimize.energies import WEIGHTS
-    from saucerfab.optimize.stages import STAGE_CAPS
     from saucerfab.optimize.request import (
         ABLATIONS,
         COLOR_INITS,
@@ -25,10 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         SURROUND_WEIGHT,
         DesignRequest,
     )
-
-    from saucerfab.cups import CUP_SPEC_USAGE
-    from saucerfab.eyes import DEFAULT_IPD_MM
-    from saucerfab.scene import paper_scene
+    from saucerfab.optimize.stages import STAGE_CAPS
 
     default = DesignRequest.default
     paper = paper_scene()  # the default scene's sizes
@@ -182,18 +182,19 @@ def given_options(args: argparse.Namespace) -> dict[str, object]:
     return given
 
 
-def _json_summary(out: object, meta: dict) -> dict:
+def _json_summary(design: Design) -> dict:
     """What --json prints: the folder, the per-stage metrics and the final metrics."""
-    m = meta["metrics"]
     stages = []
-    for st in m.get("stages", []):
-        row = {k: st.get(k) for k in ("name", "iterations", "E_visual", "E_deform", "stop_reason")}
-        if "seconds" in st:
-            row["seconds"] = st["seconds"]
+    for st in design.stage_records:
+        row = {"name": st.name, "iterations": st.iterations, "E_visual": st.E_visual, "E_deform": st.E_deform,
+               "stop_reason": st.stop_reason}
+        if st.seconds is not None:
+            row["seconds"] = st.seconds
         stages.append(row)
+    m = design.metrics
     return {
-        "design": str(out),
-        "enhancement": meta.get("parameters", {}).get("enhancement_used"),
+        "design": str(design.folder),
+        "enhancement": design.parameters.get("enhancement_used"),
         "stages": stages,
         "final": {
             "E_visual_final": m.get("E_visual_final"),
@@ -212,30 +213,44 @@ def run(args: argparse.Namespace) -> int:
     require("design")  # a missing extra is said now, not by an import minutes into the design
     require_verify(args.no_verify)
 
-    from saucerfab.optimize.pipeline import check_output_folder, run_design
+    from saucerfab.optimize.checkpoint import check_output_folder
     from saucerfab.optimize.request import DesignRequest
+    from saucerfab.workflow import run_design
 
     req = DesignRequest(**given_options(args))  # refuses bad or contradictory options before anything else
     # the library replaces an earlier design folder (batch reruns); the command asks for --force
     check_output_folder(Path(args.out), force=args.force)
     quiet = (lambda *a: None) if args.quiet else None
-    out = run_design(req, args.out, progress=quiet, look=None if args.quiet else _first_look_line(args))
-    import json
-
-    meta = json.loads((out / "design.json").read_text())
-    m = meta["metrics"]
-    verified = None if args.no_verify else _verify(out, req.printer, args)
+    design = run_design(req, args.out, progress=quiet, look=None if args.quiet else _first_look_line(args))
+    verified = None if args.no_verify else _verify(design, req.printer, args)
     if args.json:
-        doc = _json_summary(out, meta)
+        import json
+
+        doc = _json_summary(design)
         doc["verify"] = verified.to_dict(record_times=not args.no_times) if verified is not None else None
         print(json.dumps(doc, indent=2))
         return 0
-    print(f"wrote {out}")
-    enh = meta.get("parameters", {}).get("enhancement_used") or {}
+    _print_summary(design)
+    if verified is not None:
+        from saucerfab.cli.verify import view_line
+        from saucerfab.workflow import QUICK_TEXTURE_PX
+
+        print(f"  verified a trial export ({req.printer}, OBJ, {QUICK_TEXTURE_PX} px atlas) at {verified.res} px:")
+
+        for v in verified.files[0].views:
+            print(f"    {view_line(v)}")
+    print(f"  previews: {design.folder / 'previews'}; report: {design.folder / 'report.html'}")
+    return 0
+
+
+def _print_summary(design: Design) -> None:
+    """The design's lines: the enhancement and method used, each stage, the final energies, the printer's rule."""
+    print(f"wrote {design.folder}")
+    par, m = design.parameters, design.metrics
+    enh = par.get("enhancement_used") or {}
     if enh.get("strategy") in ("subject", "none"):
         what = "black-white enhancement" if enh["strategy"] == "subject" else "no enhancement (the pictures as they are)"
         print(f"  {what}: {enh.get('why', '')}")
-    par = meta.get("parameters", {})
     if par.get("method_used"):  # which stages ran, and why (the product's choice under the default, auto)
         from saucerfab.optimize.solver import SolverSettings
         from saucerfab.optimize.stages import SIGMA_SMALL
@@ -250,13 +265,13 @@ def run(args: argparse.Namespace) -> int:
               f"{', '.join(names)}{why}, at most {par['max_iters_used']} iterations a stage"
               + (f" (or until {par['stall_window_used']} renders gain under {SolverSettings.tol * 100:g} % each)"
                  if par.get("stall_window_used") else ""))
-    for st in m.get("stages", []):
+    for st in design.stage_records:
         # --no-times leaves the times out of design.json: then no time column (not "nan s")
-        secs = f"{st['seconds']:6.1f} s  " if "seconds" in st else ""
+        secs = f"{st.seconds:6.1f} s  " if st.seconds is not None else ""
         print(
-            f"  {st['name']:22s} {st['iterations']:4d} it  {secs}"
-            f"E_visual {st['E_visual']:10.1f}  E_deform {st['E_deform']:.4f}  "
-            f"conflict {100 * st['conflict_fraction']:.1f}%"
+            f"  {st.name:22s} {st.iterations:4d} it  {secs}"
+            f"E_visual {st.E_visual:10.1f}  E_deform {st.E_deform:.4f}  "
+            f"conflict {100 * st.conflict_fraction:.1f}%"
         )
     total = f"total {m['total_s']:.1f} s" if "total_s" in m else "times not recorded (--no-times)"
     if "resumed_after_stage" in m:
@@ -265,9 +280,9 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"  final E_visual {m.get('E_visual_final', float('nan')):.1f} against the original pictures "
         "(the stages' E_visual is against their blur-matched, often enhanced, targets), max |h - z| "
-        f"{m['max_abs_height_change']:.4f} (delta {meta['scene']['saucer']['delta']}), {total}"
+        f"{m['max_abs_height_change']:.4f} (delta {design.scene.saucer.delta}), {total}"
     )
-    pt = meta.get("parameters", {}).get("print_target") or {}
+    pt = par.get("print_target") or {}
     pm = m.get("printable") or {}
     if pt:
         moved = pm.get("projection_active", 0)
@@ -278,16 +293,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"  made for {pt['printer_name']}, cup diameter {pt['cup_diameter_mm']:g} mm ({pt['mm_per_unit']:g} mm "
               f"per unit, relief +-{pt['delta_mm']:.2f} mm): minimum feature {pt['min_feature_mm']:g} mm and wall "
               f"{pt['min_wall_mm']:g} mm; {rule}")
-    if verified is not None:
-        from saucerfab.cli.verify import view_line
-        from saucerfab.workflow import QUICK_TEXTURE_PX
-
-        print(f"  verified a trial export ({req.printer}, OBJ, {QUICK_TEXTURE_PX} px atlas) at {verified.res} px:")
-
-        for v in verified.files[0].views:
-            print(f"    {view_line(v)}")
-    print(f"  previews: {out / 'previews'}; report: {out / 'report.html'}")
-    return 0
 
 
 def _first_look_line(args: argparse.Namespace) -> Look:
@@ -307,7 +312,7 @@ def _first_look_line(args: argparse.Namespace) -> Look:
     return look
 
 
-def _verify(out, printer: str, args: argparse.Namespace):  # type: ignore[no-untyped-def]
+def _verify(design: Design, printer: str, args: argparse.Namespace):  # type: ignore[no-untyped-def]
     """The quick verify of a trial export, or None (with a note on stderr) when it cannot be made."""
     import sys
 
@@ -319,7 +324,8 @@ def _verify(out, printer: str, args: argparse.Namespace):  # type: ignore[no-unt
             print(f"[verify {fraction * 100:5.1f}%] {msg}", file=sys.stderr, flush=True)
 
     try:
-        return verify_design(out, printer=printer, record_times=not args.no_times, progress=progress)
+        # the printer as given (a profile .toml path too), not only the key the design records
+        return verify_design(design, printer=printer, record_times=not args.no_times, progress=progress)
     except SaucerfabError as exc:  # the design itself is complete; say why it was not verified
         print(f"  note: the design is not verified: {exc}", file=sys.stderr)
         return None

@@ -25,8 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from saucerfab.fabricate.options import NEUTRAL_WALL_RGB, SEAT_KINDS, FabOptions
-from saucerfab.formats import FORMATS, WRITERS, labels
-from saucerfab.profiles import DEFAULT_PRINTER
+from saucerfab.files.formats import FORMATS, WRITERS, labels
+from saucerfab.model.profiles import DEFAULT_PRINTER
 
 HELP = f"turn a design into print-ready files ({labels(WRITERS.values())}) with scene.json"
 

@@ -3,7 +3,7 @@
 Every command that writes takes ``-o/--out`` (``check``: the JSON report;
 ``scene``, ``shapes``: the file; ``design``, ``export``, ``verify``, ``batch``:
 a folder) and ``--force``. ``design`` and ``export`` apply the rule to their
-folders themselves (:func:`saucerfab.optimize.pipeline.check_output_folder`,
+folders themselves (:func:`saucerfab.optimize.checkpoint.check_output_folder`,
 :func:`saucerfab.cli.export.check_other_export`), ``verify`` to an ``--out``
 it is given (its default folder inside the print is the print's own and is
 refreshed), ``batch`` by reusing complete jobs unless ``--force``.

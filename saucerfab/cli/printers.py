@@ -16,7 +16,7 @@ def run(args: argparse.Namespace) -> int:
     import json
     from dataclasses import asdict
 
-    from saucerfab.profiles import list_profiles
+    from saucerfab.model.profiles import list_profiles
 
     profiles = list_profiles()
     if args.json:

@@ -20,8 +20,8 @@ def run(args: argparse.Namespace) -> int:
     import tomllib
 
     from saucerfab.cli.outputs import refuse_existing
-    from saucerfab.fileio import write_text_atomic
-    from saucerfab.scene import load_scene, scene_to_toml
+    from saucerfab.files.fileio import write_text_atomic
+    from saucerfab.model.scene import load_scene, scene_to_toml
 
     text = scene_to_toml(load_scene(args.source))
     if args.json:  # the same validated scene, as JSON (the TOML's tables and keys)

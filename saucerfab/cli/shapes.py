@@ -22,9 +22,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from saucerfab.errors import ConfigError
-    from saucerfab.fileio import write_bytes_atomic
-    from saucerfab.heightfield import BASE_SHAPES, base_shape
-    from saucerfab.scene import MAX_GRID, MIN_GRID
+    from saucerfab.files.fileio import write_bytes_atomic
+    from saucerfab.model.heightfield import BASE_SHAPES, base_shape
+    from saucerfab.model.scene import MAX_GRID, MIN_GRID
 
     if not MIN_GRID <= args.resolution <= MAX_GRID:
         raise ConfigError(

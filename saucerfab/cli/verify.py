@@ -24,13 +24,13 @@ HELP = "ray-trace an export folder's files and score what the viewer sees agains
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from saucerfab.cli.schema_flag import add_schema_flag
+    from saucerfab.model.eyes import DEFAULT_IPD_MM
     from saucerfab.verify.core import (
         DEFAULT_MIN_COVERAGE,
         DEFAULT_MIN_PSNR_DB,
         DEFAULT_RES,
         DEFAULT_SPP,
     )
-    from saucerfab.eyes import DEFAULT_IPD_MM
 
     p.add_argument("folder", nargs="?", metavar="PRINT_DIR", help="a folder written by 'saucerfab export'")
     p.add_argument("--eyes", default=None, metavar="MODE",
@@ -106,8 +106,8 @@ def run(args: argparse.Namespace) -> int:
 
     from saucerfab.cli.schema_flag import schema_asked
     from saucerfab.errors import ConfigError
-    from saucerfab.fileio import atomic_dir
-    from saucerfab.eyes import DEFAULT_IPD_MM
+    from saucerfab.files.fileio import atomic_dir
+    from saucerfab.model.eyes import DEFAULT_IPD_MM
     from saucerfab.verify import parse_eyes, verify_print
     from saucerfab.verify.schema import JSON_SCHEMA
 
@@ -145,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
         doc = result.to_dict()
         (tmp / "verify.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     if out.resolve().parent == folder.resolve():
-        from saucerfab.report_page import refresh_export_report
+        from saucerfab.pages.folder_pages import refresh_export_report
 
         refresh_export_report(folder)
     if args.json:

@@ -31,10 +31,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from saucerfab import imageio
-from saucerfab.design import Design, FaceView
 from saucerfab.fabricate.atlas import AtlasLayout, UVMap
 from saucerfab.fabricate.solid import Solid
+from saucerfab.files import imageio
+from saucerfab.model.design import Design, FaceView
 from saucerfab.render.sampling import sample_bilinear
 
 #: over-relaxation of the red-black sweeps: what the coarse levels leave is

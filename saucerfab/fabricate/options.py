@@ -58,7 +58,7 @@ class FabOptions:
             so bilinear filtering and mipmaps never reach background.
         wall_rgb: sRGB 8-bit colour of walls, base and seat; None (the default): the background
             the design meant around its direct picture (its ``--background``, else the picture's
-            border colour: :func:`saucerfab.images.intended_background`), so the walls and the cup
+            border colour: :func:`saucerfab.imaging.images.intended_background`), so the walls and the cup
             seat a viewer sees beside the picture do not stand out from it;
             :data:`NEUTRAL_WALL_RGB` for a design without references.
         mirror_rgb: sRGB 8-bit colour of the points of those surfaces the cup shows the design

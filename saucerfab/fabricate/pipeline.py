@@ -26,7 +26,6 @@ import hashlib
 import json
 import math
 import os
-import re
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -36,10 +35,11 @@ from typing import Any
 import numpy as np
 
 from saucerfab import __version__
-from saucerfab.design import Design, load_design, reference_name
 from saucerfab.errors import ConfigError, DesignError, ExportError
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.profiles import DEFAULT_PRINTER, PrinterProfile, load_profile
+from saucerfab.model.design import Design
+from saucerfab.model.design_folder import load_design, reference_name
+from saucerfab.model.profiles import DEFAULT_PRINTER, PrinterProfile, load_profile
 
 Progress = Callable[[str, float], None]
 
@@ -71,7 +71,7 @@ class ExportResult:
         timings: step -> seconds (not written to any file).
         printer_source: where the printer came from: ``given`` (the caller named it),
             ``design`` (the printer the design was made for) or ``default``
-            (the design records none: :data:`~saucerfab.profiles.DEFAULT_PRINTER`).
+            (the design records none: :data:`~saucerfab.model.profiles.DEFAULT_PRINTER`).
         other_formats: formats the printer does not take, written on request into
             :data:`~saucerfab.fabricate.registry.OTHER_FORMATS_DIR` (outside the print set).
         profile: the printer profile exported for (not in :meth:`to_dict`).
@@ -141,7 +141,7 @@ def export_lock(out: str | os.PathLike[str]) -> Iterator[None]:
         ExportError: another export (another process, or another thread of
             this one) is writing ``out``.
     """
-    from saucerfab.fileio import exclusive_lock
+    from saucerfab.files.fileio import exclusive_lock
 
     lock = export_lock_path(out)
     # the lock lives in --out's parent, which may not exist yet: make it, and
@@ -191,38 +191,11 @@ PRINTER_SOURCES = {
 }
 
 
-#: what a profile key looks like (a profile file's stem): never a path, so a key a design.json
-#: records is only ever looked up among the installation's profiles, not read from a file
-PROFILE_KEY_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
-
-
-def printer_made_for(parameters: Any) -> str | None:
-    """The key of the printer a design was made for, from its design.json ``parameters``, or None.
-
-    ``parameters.printer`` (as ``saucerfab design --printer`` was given) when
-    it is a profile key, else the key ``parameters.print_target`` records (a
-    profile given as a .toml file is named by the key it declares); None for
-    parameters that record neither (a synthetic design, one older than the
-    print target, or not a mapping). Only keys are returned, never paths: a
-    design folder may come from anyone, and its printer is looked up among
-    this installation's profiles. The one rule for ``saucerfab export``
-    without ``--printer`` (:func:`export_printer`) and a batch job without a
-    ``printer`` (:func:`saucerfab.batch.jobs.design_printer`, which reads
-    design.json alone).
-    """
-    params = parameters if isinstance(parameters, dict) else {}
-    target = params.get("print_target")
-    for made in (params.get("printer"), target.get("printer") if isinstance(target, dict) else None):
-        if isinstance(made, str) and PROFILE_KEY_RE.fullmatch(made):
-            return made
-    return None
-
-
 def export_printer(design: Design, printer: str | PrinterProfile | None) -> tuple[PrinterProfile, str]:
     """The profile to export ``design`` for, and where it came from (a key of :data:`PRINTER_SOURCES`).
 
     ``printer`` when given; else the printer the design was made for
-    (:func:`printer_made_for`); else :data:`~saucerfab.profiles.DEFAULT_PRINTER`.
+    (:attr:`Design.intent`'s ``printer``); else :data:`~saucerfab.model.profiles.DEFAULT_PRINTER`.
 
     Raises:
         ConfigError: an unknown printer, or the design's own printer can no
@@ -230,7 +203,7 @@ def export_printer(design: Design, printer: str | PrinterProfile | None) -> tupl
     """
     if printer is not None:
         return (printer if isinstance(printer, PrinterProfile) else load_profile(printer)), "given"
-    made = printer_made_for(design.parameters)
+    made = design.intent.printer
     if made is None:
         return load_profile(DEFAULT_PRINTER), "default"
     try:
@@ -245,7 +218,7 @@ def export_printer(design: Design, printer: str | PrinterProfile | None) -> tupl
 def surround_rgb(design: Design, view: str = "direct") -> tuple[int, int, int]:
     """The colour of the surfaces beside a picture by default: the background meant around ``view``'s picture.
 
-    :func:`saucerfab.images.intended_background` of the design's reference of
+    :func:`saucerfab.imaging.images.intended_background` of the design's reference of
     ``view`` and its ``--background``: a viewer sees the seat plate and the
     walls beside the direct picture (the walls' colour, ``view="direct"``), and
     the strip of plate the cup shows under the reflected one (``"reflected"``),
@@ -254,7 +227,7 @@ def surround_rgb(design: Design, view: str = "direct") -> tuple[int, int, int]:
     records neither (a synthetic one).
     """
     from saucerfab.fabricate.options import NEUTRAL_WALL_RGB
-    from saucerfab.images import intended_background, recorded_background
+    from saucerfab.imaging.images import intended_background, recorded_background
 
     ref = design.references.get(view)
     picture = None if ref is None else np.asarray(ref, np.float64) / 255.0
@@ -297,7 +270,7 @@ def export_design(
         cup_diameter_mm: the real cup's width (circle: diameter; ellipse: 2a;
             prism: 2 x circumradius), mm; None keeps the design's.
         formats: formats to write (keys or aliases of
-            :data:`saucerfab.formats.WRITERS`); None: the profile's preferred format.
+            :data:`saucerfab.files.formats.WRITERS`); None: the profile's preferred format.
         options: solid, seat and texture settings.
         progress: called with (step name, overall fraction in [0, 1]).
         allow_other_formats: write formats the printer does not take, into
@@ -367,7 +340,7 @@ def export_design(
     from saucerfab.fabricate.sides import balance, paint_sides, side_vertex_colours
     from saucerfab.fabricate.solid import build_solid
     from saucerfab.fabricate.textured import TexturedMesh
-    from saucerfab.imageio import png_bytes_many
+    from saucerfab.files.imageio import png_bytes_many
 
     solid = build_solid(dsg, scene.mm_per_unit, opts, profile)
     bbox = solid.bbox_mm

@@ -1,9 +1,9 @@
 """Running the exporters, and the one place that writes the output folder.
 
-The formats and their writers are rows of :data:`saucerfab.formats.TABLE`;
+The formats and their writers are rows of :data:`saucerfab.files.formats.TABLE`;
 each writer is a pure function ``(TexturedMesh, FabOptions) -> {file name: bytes}``.
 :func:`write_folder` writes all of them, plus ``scene.json`` and
-``export.json``, as one folder via :func:`saucerfab.fileio.atomic_dir`: the
+``export.json``, as one folder via :func:`saucerfab.files.fileio.atomic_dir`: the
 folder appears complete or not at all.
 """
 
@@ -16,9 +16,8 @@ from pathlib import Path
 from saucerfab.errors import ExportError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.textured import TexturedMesh
-from saucerfab.fileio import atomic_dir
-from saucerfab.formats import WRITERS, lookup
-
+from saucerfab.files.fileio import atomic_dir
+from saucerfab.files.formats import WRITERS, lookup
 
 #: the subfolder of an export that holds the files of formats the printer does not take, written on
 #: request (``allow_other=True``, ``saucerfab export --allow-format``): outside the print set, so every
@@ -71,7 +70,7 @@ def normalize_formats(
 
 
 def render(mesh: TexturedMesh, fmt: str, options: FabOptions) -> dict[str, bytes]:
-    """The files of one format (a key of :data:`~saucerfab.formats.WRITERS`), in memory."""
+    """The files of one format (a key of :data:`~saucerfab.files.formats.WRITERS`), in memory."""
     return WRITERS[fmt].load_writer()(mesh, options)
 
 

@@ -12,7 +12,7 @@ the same numbers in metres)::
      "cup": {"shape": "circle", "center": [x, y], "bottom_z": z, "height": h, "radius": r}
             | {"shape": "ellipse", ..., "semi_axes": [a, b], "rotation_deg": t}
             | {"shape": "prism", ..., "sides": n, "circumradius": r, "rotation_deg": t}
-            (each shape's fields: its ``file_fields``, saucerfab/cups.py),
+            (each shape's fields: its ``file_fields``, saucerfab/model/cups.py),
      "model_to_file": [[s, 0, 0, tx], [0, s, 0, ty], [0, 0, s, tz], [0, 0, 0, 1]]}
 
 ``viewing_angle_deg`` is SoftRas's: tan(angle) = half the frame's width /
@@ -26,6 +26,11 @@ into the positive octant, so angles and the up vector are unchanged.
 
 Beyond those fields: ``mm_per_unit``, the saucer's footprint and the cup
 seat in file coordinates, and the GLB's node transform.
+
+The reader, beside this writer: :mod:`saucerfab.fabricate.scene_file`
+(:func:`~saucerfab.fabricate.scene_file.read_scene_file`, one typed
+:class:`~saucerfab.fabricate.scene_file.PrintScene`), which also holds the
+schema's name.
 """
 
 from __future__ import annotations
@@ -36,10 +41,11 @@ from typing import Any
 import numpy as np
 
 from saucerfab.fabricate.export_glb import Z_UP_TO_Y_UP
+from saucerfab.fabricate.scene_file import SCHEMA, UNITS
 from saucerfab.fabricate.solid import Solid
-from saucerfab.scene import Scene
+from saucerfab.model.scene import Scene
 
-SCHEMA = "saucerfab.scene/1"
+__all__ = ["DECIMALS", "SCHEMA", "scene_dict", "scene_json_bytes", "viewing_dict"]
 
 #: decimals of millimetre values in scene.json (10 nm)
 DECIMALS = 6
@@ -85,7 +91,7 @@ def viewing_dict(scene: Scene, model_to_file: np.ndarray) -> dict[str, Any]:
 
     return {
         "schema": SCHEMA,
-        "units": "mm",
+        "units": UNITS,
         "camera": {"position": _pt(m, scene.camera), "up": [0.0, 0.0, 1.0]},
         "views": {
             "direct": view("direct"),

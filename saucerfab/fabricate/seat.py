@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.scene import Scene
+from saucerfab.model.scene import Scene
 
 #: vertices of the seat's offset outlines closer than this to the line through
 #: their neighbours are dropped (``CrossSection.simplify``), mm

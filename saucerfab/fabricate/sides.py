@@ -15,7 +15,7 @@ in which it looks larger (:func:`view_areas`: the image area of a small patch
 around it, directly and in the cup): the cup's convex mirror shrinks what it
 shows except for the strip in front of it, which the mirror spreads out under
 the reflected picture while the eye sees it foreshortened. A reflection counts
-where it is valid (:func:`saucerfab.mirror.reflect`: the mirror point T on the
+where it is valid (:func:`saucerfab.model.mirror.reflect`: the mirror point T on the
 part of the cup the eye sees, between its bottom and rim) and the surface
 faces T; the saucer's top, which could hide a point from the cup, lies on
 the far side of the points the cup shows, so no occlusion test is made.
@@ -32,9 +32,9 @@ import numpy as np
 
 from saucerfab.fabricate.atlas import UVMap
 from saucerfab.fabricate.solid import Solid
-from saucerfab.render.camera import Camera
+from saucerfab.model.camera import Camera
+from saucerfab.model.scene import Scene
 from saucerfab.render.texels import raster_triangles_2d
-from saucerfab.scene import Scene
 
 #: the side of the small patch whose image areas decide a point's colour (model units: 0.1 mm at 100 mm a unit)
 AREA_STEP = 1e-3
@@ -93,7 +93,7 @@ def view_areas(scene: Scene, points: np.ndarray, normals: np.ndarray,
         and of its reflection, summed over the cup's pieces (0 where no piece
         reflects it validly or the surface faces away from the mirror point).
     """
-    from saucerfab.mirror import reflect
+    from saucerfab.model.mirror import reflect
 
     pts = np.asarray(points, np.float64)
     nrm = np.asarray(normals, np.float64)

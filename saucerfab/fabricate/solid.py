@@ -54,15 +54,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from saucerfab.design import Design
 from saucerfab.errors import MeshError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.seat import (
-    OUTLINE_EPS_MM, clip_to_cup_side, cross_section, cup_outline_mm, facing_edge, seat_wall,
+    OUTLINE_EPS_MM,
+    clip_to_cup_side,
+    cross_section,
+    cup_outline_mm,
+    facing_edge,
+    seat_wall,
 )
-from saucerfab.profiles import PrinterProfile
-from saucerfab.heightfield import make_grid, triangulate
-from saucerfab.relief import WALL_MARGIN, crest_widths, wall_widths
+from saucerfab.model.design import Design
+from saucerfab.model.heightfield import make_grid, triangulate
+from saucerfab.model.profiles import PrinterProfile
+from saucerfab.model.relief import WALL_MARGIN, crest_widths, wall_widths
 
 #: manifold's merge tolerance, mm: far below printer resolution, far above
 #: the 10 nm rounding of written coordinates, so no two distinct vertices
@@ -323,7 +328,7 @@ def _blunt_for(
     Returns:
         (blunted heights (N, N) mm, a warning; "" when nothing changed).
     """
-    from saucerfab.relief import blunt_thin_crests
+    from saucerfab.model.relief import blunt_thin_crests
 
     dx, dy = float(xs[1] - xs[0]), float(ys[1] - ys[0])
     base = np.asarray(design.base_heights, np.float64) * s

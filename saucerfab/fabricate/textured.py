@@ -4,7 +4,7 @@ A :class:`TexturedMesh` is the finished part in file coordinates: shared
 positions (so it is watertight as written), texture coordinates indexed per
 face corner, the atlas as PNG bytes, per-vertex colours for formats without
 textures. Writers are pure functions ``(TexturedMesh, FabOptions | None) -> dict[name, bytes]``
-(listed in :mod:`saucerfab.formats`);
+(listed in :mod:`saucerfab.files.formats`);
 only :mod:`saucerfab.fabricate.registry` writes files.
 """
 

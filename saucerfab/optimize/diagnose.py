@@ -3,7 +3,7 @@
 The method deforms the base shape by at most delta so that the faces the
 viewer sees directly and those seen in the mirror cup carry different
 colours (paper, sections 3-4). A face seen in both views (a *conflict*,
-:class:`~saucerfab.design.FaceView` ``BOTH``) must serve two pictures, and
+:class:`~saucerfab.model.design.FaceView` ``BOTH``) must serve two pictures, and
 texturing gives it their average: the ghost of each picture in the other.
 How many faces start in both views is set by the base shape and the fixed
 mirror geometry alone, and the optimisation can part only some of them.
@@ -18,7 +18,7 @@ share after the design: a suspect shape still over
 Both are said as ``note:`` lines on stderr (as the print notes) and the
 verdict is recorded in design.json as ``metrics.base_shape``.
 
-Measured with :func:`~saucerfab.optimize.pipeline.run_design` (issue 42;
+Measured with :func:`~saucerfab.optimize.pipeline.optimize_design` (issue 42;
 the heart/star pair unless said, the paper scene and cup, the defaults
 otherwise; resolution x image size), the share in % of the seen faces in
 both views on the base shape -> after the design:
@@ -59,7 +59,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from saucerfab.design import FRAMED_VIEWS, FaceView
+from saucerfab.model.design import FRAMED_VIEWS, FaceView
 
 if TYPE_CHECKING:
     from saucerfab.optimize.prepare import Prepared
@@ -80,7 +80,7 @@ def conflict_share(face_view: np.ndarray) -> float:
     """Share (0..1) of the seen faces that are seen both directly and in a reflection.
 
     Args:
-        face_view: (F,) :class:`~saucerfab.design.FaceView` per face.
+        face_view: (F,) :class:`~saucerfab.model.design.FaceView` per face.
     """
     fv = np.asarray(face_view)
     seen = int(np.isin(fv, FRAMED_VIEWS).sum())
@@ -207,7 +207,7 @@ def check_base_shape(prep: Prepared, rig: ViewMeshes, shape: str, seed: int = 0)
             as design.json names it).
         seed: the request's seed (for the built-in shapes measured beside it).
     """
-    from saucerfab.heightfield import base_shape
+    from saucerfab.model.heightfield import base_shape
     from saucerfab.optimize.views import ViewMeshes
 
     is_file = Path(str(shape)).suffix.lower() in (".png", ".npy")

@@ -2,7 +2,7 @@
 
 Notation (paper): ``h`` (V,) current heights, ``z`` (V,) base heights,
 ``c`` (F, 3) per-face colours, ``delta`` the height bound, ``L`` the uniform
-Laplacian of the grid mesh (:func:`saucerfab.heightfield.laplacian`).
+Laplacian of the grid mesh (:func:`saucerfab.model.heightfield.laplacian`).
 
 * E_visual (eq. 2/7): ``sum ||target - rendered||_F^2`` over the views.
 * E_deform (eq. 3): ``sum_i ((L z)_i - (L h)_i)^2``.
@@ -292,7 +292,7 @@ class Term:
 
 
 def _deform(p: Problem) -> Energy:
-    from saucerfab.heightfield import laplacian
+    from saucerfab.model.heightfield import laplacian
 
     deform = DeformEnergy(laplacian(p.n), p.z)
     return lambda h, c: deform(h)

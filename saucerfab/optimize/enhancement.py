@@ -10,7 +10,7 @@ the height field first learns where the subjects go.
 * three views (multi-reflection): :func:`solid_colour_targets`, subjects red,
   green and blue, backgrounds white.
 
-The masks come from :func:`saucerfab.masks.foreground_mask`.
+The masks come from :func:`saucerfab.imaging.masks.foreground_mask`.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from saucerfab.images import WHITE
+from saucerfab.imaging.images import WHITE
 
 #: black-white enhancement background (paper, section 3.4.1: "light blue"),
 #: the colour farthest from both black and white; sRGB in [0, 1]

@@ -8,7 +8,7 @@ camera and re-aims each frame at the region the saucer covers in it:
 
 Each frame holds its picture at the picture's own aspect (a wide word gets a
 wide frame): a rectangle of that aspect, centred in the square view, whose
-``extent`` the scene records (:class:`saucerfab.scene.ViewFrame`); the rest of
+``extent`` the scene records (:class:`saucerfab.model.scene.ViewFrame`); the rest of
 the square is the picture's background.
 
 * ``"contain"``: the largest such rectangle inside the region's bounding box,
@@ -38,10 +38,10 @@ from dataclasses import replace
 import numpy as np
 
 from saucerfab.errors import ConfigError
-from saucerfab.heightfield import make_grid
+from saucerfab.model.camera import Camera
+from saucerfab.model.heightfield import make_grid
+from saucerfab.model.scene import Scene, ViewFrame
 from saucerfab.optimize.request import FRAMES
-from saucerfab.render.camera import Camera
-from saucerfab.scene import Scene, ViewFrame
 
 #: the frames this module fits (the request's choices but "scene", which keeps the scene's own)
 FITTED_FRAMES = tuple(m for m in FRAMES if m != "scene")
@@ -150,7 +150,7 @@ def fit_frames(
         aspects: view name -> its picture's width over height (default 1: a square).
     """
     aspects = aspects or {}
-    from saucerfab.mirror import reflect
+    from saucerfab.model.mirror import reflect
 
     if mode not in FITTED_FRAMES:
         raise ConfigError(f"frames mode must be one of {', '.join(FITTED_FRAMES)}, got {mode!r}")

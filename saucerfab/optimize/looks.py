@@ -45,16 +45,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from saucerfab.fileio import write_bytes_atomic
+from saucerfab.files.fileio import write_bytes_atomic
 
 if TYPE_CHECKING:
+    from saucerfab.model.camera import Camera
+    from saucerfab.model.scene import Scene
     from saucerfab.optimize.prepare import Prepared
     from saucerfab.optimize.views import ViewMesh, ViewMeshes
-    from saucerfab.render.camera import Camera
-    from saucerfab.scene import Scene
 
 #: look(stage, files, elapsed_s): stage "first_look" or a stage's name; files: name
-#: ("direct", "reflected", "reflected2", "composite") -> PNG path; seconds since run_design started
+#: ("direct", "reflected", "reflected2", "composite") -> PNG path; seconds since optimize_design started
 Look = Callable[[str, dict[str, Path], float], None]
 
 #: the stage name of the first look
@@ -156,8 +156,8 @@ class Looks:
         is left out with a note on stderr: the design goes on, and its own
         writes report the disk.
         """
-        from saucerfab.imageio import png_bytes
-        from saucerfab.report import as_uint8_rgb
+        from saucerfab.files.imageio import png_bytes
+        from saucerfab.imaging.panels import as_uint8_rgb
 
         files: dict[str, Path] = {}
         colors = look_colors(rig, prep, heights)

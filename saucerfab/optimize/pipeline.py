@@ -1,4 +1,4 @@
-"""``run_design``: from a :class:`DesignRequest` to a design folder (Algorithm 1).
+"""``optimize_design``: from a :class:`DesignRequest` to a design folder (Algorithm 1).
 
 1. :func:`saucerfab.optimize.prepare.prepare`: every input is read and
    validated before any work (scene, shape, images, masks), so bad input
@@ -8,7 +8,10 @@
    objective its declared terms make (:data:`saucerfab.optimize.energies.TERMS`),
    with the weights set from the compatibility score rho unless the user gives them;
 3. texturing with the final shape (section 3.4.2);
-4. metrics, previews and the design folder, written atomically.
+4. metrics, previews and the design folder, written atomically, with the
+   pages the caller asks for (``pages``: the workflow's
+   :func:`saucerfab.workflow.run_design` adds the design's ``report.html``;
+   the optimizer itself draws no page).
 
 Looks (:mod:`saucerfab.optimize.looks`): a first look right after step 1,
 before torch is imported, and a refined one after every stage, written
@@ -21,9 +24,7 @@ resumes from it (the request's hash must match). A finished run removes it.
 
 from __future__ import annotations
 
-import hashlib
 import json
-import shutil
 import sys
 import time
 from collections.abc import Callable
@@ -33,10 +34,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from saucerfab import __version__
-from saucerfab.design import Design, FaceView, save_design
-from saucerfab.errors import ConfigError, Interrupted, OutputError
-from saucerfab.fileio import write_bytes_atomic
+from saucerfab.errors import Interrupted, OutputError
+from saucerfab.model.design import Design, FaceView
+from saucerfab.model.design_folder import load_design, save_design
+from saucerfab.optimize.checkpoint import Checkpoint, check_output_folder, request_hash
 from saucerfab.optimize.diagnose import check_base_shape, conflict_share
 from saucerfab.optimize.energies import WEIGHTS
 from saucerfab.optimize.looks import Look, Looks
@@ -86,90 +87,6 @@ def _is_interrupt(exc: BaseException) -> bool:
     return False
 
 
-def check_output_folder(out: Path, force: bool = True) -> None:
-    """Refuse, before any work, an output path whose replacement would lose a user's data.
-
-    The design folder is written atomically and replaces ``out`` when done;
-    that is only safe when ``out`` does not exist, is an empty folder, or is
-    an earlier design folder (it holds ``design.json``). With ``force``
-    False an earlier design folder is refused too (the CLI without
-    ``--force``); the library's default replaces it, as batch reruns need.
-    """
-    if not out.exists():
-        return
-    if not out.is_dir():
-        raise ConfigError(f"--out {str(out)!r} is an existing file; give a new or empty folder for the design")
-    if any(out.iterdir()) and not (out / "design.json").is_file():
-        raise ConfigError(
-            f"--out {str(out)!r} is a non-empty folder that is not a design folder; saucerfab would "
-            "replace it. Give a new or empty folder, or remove it first"
-        )
-    if not force and (out / "design.json").is_file():
-        raise ConfigError(
-            f"--out {str(out)!r} already holds a design; writing this one would replace it. "
-            "Give a new folder, or add --force to replace it"
-        )
-
-
-def request_hash(request: DesignRequest, prepared: Prepared) -> str:
-    """Hash of everything that determines the result (for resume and batch)."""
-    d = asdict(request)
-    for k, v in list(d.items()):
-        if isinstance(v, Path):
-            d[k] = str(v)
-    payload = json.dumps({"req": d, "inputs": prepared.inputs, "v": __version__}, sort_keys=True, default=str)
-    return hashlib.sha256(payload.encode()).hexdigest()
-
-
-class _Checkpoint:
-    def __init__(self, out: Path, key: str) -> None:
-        self.dir = out.parent / f".{out.name}.checkpoint"
-        self.key = key
-
-    def load(self) -> dict[str, Any] | None:
-        f = self.dir / "state.npz"
-        if not f.is_file():
-            return None
-        try:
-            with np.load(f, allow_pickle=False) as z:
-                if str(z["key"]) != self.key:
-                    return None
-                return {
-                    "stage": int(z["stage"]),
-                    "h": z["h"],
-                    "c": z["c"],
-                    "log": json.loads(str(z["log"])),
-                    "metrics": json.loads(str(z["metrics"])),
-                    "weights": json.loads(str(z["weights"])),
-                    # wall time of earlier runs up to the saved state (0 in older checkpoints)
-                    "elapsed_s": float(z["elapsed_s"]) if "elapsed_s" in z.files else 0.0,
-                }
-        except (OSError, ValueError, KeyError):
-            return None  # a damaged checkpoint is ignored; the run starts afresh
-
-    def save(
-        self, stage: int, h: np.ndarray, c: np.ndarray, log: list, metrics: dict, weights: dict, elapsed_s: float = 0.0
-    ) -> None:
-        import io
-
-        buf = io.BytesIO()
-        np.savez(
-            buf,
-            key=np.array(self.key),
-            stage=np.array(stage),
-            h=h,
-            c=c,
-            log=np.array(json.dumps(log)),
-            metrics=np.array(json.dumps(metrics)),
-            weights=np.array(json.dumps(weights)),
-            elapsed_s=np.array(float(elapsed_s)),
-        )
-        write_bytes_atomic(self.dir / "state.npz", buf.getvalue())
-
-    def clear(self) -> None:
-        shutil.rmtree(self.dir, ignore_errors=True)
-
-
 def _print_progress(stage: str, it: int, max_it: int, parts: dict[str, float], elapsed: float) -> None:
     per = elapsed / max(it, 1)
     left = per * (max_it - it)
@@ -182,15 +99,21 @@ def _print_progress(stage: str, it: int, max_it: int, parts: dict[str, float], e
     )
 
 
-def run_design(
+#: ``pages(design, previews)``: more files of the design folder made from the finished design and its
+#: previews (PNG bytes by name), by relative name -> bytes (the workflow's report page)
+Pages = Callable[[Design, dict[str, bytes]], dict[str, bytes]]
+
+
+def optimize_design(
     request: DesignRequest,
     out: str | Path,
     *,
     progress: Progress | None = None,
     log_every_s: float = 2.0,
     look: Look | None = None,
-) -> Path:
-    """Run the whole method and write the design folder ``out`` atomically.
+    pages: Pages | None = None,
+) -> Design:
+    """Run the whole method and write the design folder ``out`` atomically; return the design.
 
     Args:
         request: what to design.
@@ -202,7 +125,11 @@ def run_design(
             shape with projected colours, before any optimisation), then each
             stage's name; ``files`` maps each view and ``"composite"`` to its PNG
             in the checkpoint folder's ``previews/``; ``elapsed_s`` counts from
-            the call of run_design. An exception it raises is reported and ignored.
+            the call of optimize_design. An exception it raises is reported and ignored.
+        pages: files made from the finished design, written with the folder (atomically, with it).
+
+    Returns:
+        the design as written, read back from ``out`` (its ``folder``).
 
     Raises:
         SaucerfabError: bad inputs (before any work), Interrupted on Ctrl-C
@@ -218,7 +145,7 @@ def run_design(
     stages = stages_for(request.ablation, request.method, enhanced)
     if not enhanced:
         stages = without_enhancement(stages)
-    ckpt = _Checkpoint(out, request_hash(request, prep))
+    ckpt = Checkpoint(out, request_hash(request, prep))
     for note in prep.print_notes:
         print(f"  note: {note}", file=sys.stderr)
     # the first look, before torch is imported, rho and any stage: what the saucer shows before optimisation
@@ -227,8 +154,8 @@ def run_design(
 
     import torch
 
-    from saucerfab.optimize.views import Rig
     from saucerfab.optimize.viewpoints import eye_rigs
+    from saucerfab.optimize.views import Rig
 
     torch.manual_seed(request.seed)
     rig = Rig(prep.scene, prep.base, reflected_groups=prep.reflected_groups)
@@ -282,18 +209,18 @@ def run_design(
         metrics["resumed_after_stage"] = first
     if not request.record_times:
         _drop_times(metrics)
-    _write(design, previews, energy_log, out, ckpt)
+    extra = pages(design, previews) if pages is not None else {}
+    _write(design, previews, {"energy_log.jsonl": energy_log, **extra}, out, ckpt)
     ckpt.clear()
-    return out
+    # read back, so what the caller gets is what every later reader gets (float32 UVs, the PNGs' bytes)
+    return load_design(out)
 
 
-def _write(design: Design, previews: dict[str, bytes], energy_log: bytes, out: Path, ckpt: _Checkpoint) -> None:
-    """Write the design folder with its previews, energy log and report page (atomically)."""
-    from saucerfab.report_page import REPORT_NAME, design_report
-
-    report = design_report(design, previews).encode("utf-8")
+def _write(design: Design, previews: dict[str, bytes], extra: dict[str, bytes], out: Path,
+           ckpt: Checkpoint) -> None:
+    """Write the design folder with its previews and ``extra`` files (the energy log, pages), atomically."""
     try:
-        save_design(design, out, previews=previews, extra_files={"energy_log.jsonl": energy_log, REPORT_NAME: report})
+        save_design(design, out, previews=previews, extra_files=extra)
     except OSError as exc:
         # nothing half-written is left (save_design writes a temporary folder and renames it);
         # the finished stages stay in the checkpoint, so no work is lost
@@ -328,12 +255,11 @@ class _StageLoop:
     ) -> None:
         import torch
 
-        from saucerfab.optimize.viewpoints import decal_height
-
         from saucerfab.optimize.energies import TERMS, Problem
         from saucerfab.optimize.printable import CrestProjection
         from saucerfab.optimize.surround import Surround
         from saucerfab.optimize.targets import compatibility
+        from saucerfab.optimize.viewpoints import decal_height
 
         self.request, self.prep, self.rig, self.stages = request, prep, rig, stages
         self.cap = request.stage_cap(_enhanced(prep.enhancement))  # iterations per stage at most
@@ -349,7 +275,7 @@ class _StageLoop:
         self.problem = Problem(self.z, scene.saucer.delta, scene.saucer.resolution, rig.num_faces)
         #: every declared term with its energy for this run, in the energy log's order
         self.energies = [(t, t.make(self.problem)) for t in TERMS]
-        # the printer's minimum feature and wall, kept on every iterate (saucerfab.relief)
+        # the printer's minimum feature and wall, kept on every iterate (saucerfab.model.relief)
         self.project = CrestProjection(prep.target, scene, prep.base) if prep.target is not None else None
         self._targets: dict[tuple[str, float], dict[str, Any]] = {}
         #: the whole view around the frames (saucerfab.optimize.surround); None with surround_weight 0
@@ -410,7 +336,7 @@ class _StageLoop:
     def e_visual_eyes(self, spec: StageSpec, design_part: torch.Tensor, hh: torch.Tensor,
                       cc: torch.Tensor) -> torch.Tensor:
         """E_visual over the eyes: the design eye's ``design_part`` and each other eye's, weighted
-        (:func:`saucerfab.eyes.eye_weights`) and scaled to the design eye's pixels
+        (:func:`saucerfab.model.eyes.eye_weights`) and scaled to the design eye's pixels
         (:attr:`~saucerfab.optimize.viewpoints.EyeRig.area_factor`), added in eye order."""
         from saucerfab.optimize.energies import e_visual
 

@@ -17,10 +17,11 @@ from typing import Any
 import numpy as np
 
 from saucerfab.errors import ConfigError, MaskError
-from saucerfab.fileio import sha256_file
+from saucerfab.files.fileio import sha256_file
+from saucerfab.model.cups import parse_cup_spec
+from saucerfab.model.scene import VIEW_NAMES, Scene, load_scene
 from saucerfab.optimize.printable import PrintTarget, preflight, print_target
 from saucerfab.optimize.request import DesignRequest
-from saucerfab.scene import VIEW_NAMES, Scene, load_scene, parse_cup_spec
 
 #: the largest texture panel, pixels per side (the texture keeps more detail than the render size)
 TEXTURE_MAX = 2048
@@ -82,10 +83,10 @@ def build_scene(request: DesignRequest) -> Scene:
 
 def prepare(request: DesignRequest) -> Prepared:
     """Read and validate every input; raise a SaucerfabError before any work."""
-    from saucerfab import fitting
-    from saucerfab import images as im
-    from saucerfab.heightfield import load_shape
-    from saucerfab.masks import PLAIN_SHARE, plain_background_share, prepare_image
+    from saucerfab.imaging import fitting
+    from saucerfab.imaging import images as im
+    from saucerfab.imaging.masks import PLAIN_SHARE, plain_background_share, prepare_image
+    from saucerfab.model.heightfield import load_shape
     from saucerfab.optimize.enhancement import black_white_targets, solid_colour_targets
 
     scene = build_scene(request)

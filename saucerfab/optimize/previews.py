@@ -25,13 +25,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from saucerfab.design import Design
-from saucerfab.render.camera import Camera
+from saucerfab.model.camera import Camera
+from saucerfab.model.design import Design
 
 if TYPE_CHECKING:
+    from saucerfab.model.scene import Scene
     from saucerfab.optimize.prepare import Prepared
-    from saucerfab.optimize.views import Rig, View, ViewMesh, ViewMeshes
-    from saucerfab.scene import Scene
+    from saucerfab.optimize.views import Rig, View, ViewMeshes
 
 CUP_GREY = np.array([0.80, 0.82, 0.85])
 BACKDROP = np.array([0.97, 0.97, 0.97])
@@ -187,8 +187,8 @@ def make_previews(
     """PNG previews (name -> bytes) and the final metrics."""
     import torch
 
-    from saucerfab import report
-    from saucerfab.imageio import png_bytes_many
+    from saucerfab.files.imageio import png_bytes_many
+    from saucerfab.imaging import panels as report
     from saucerfab.optimize.stages import SIGMA_SMALL
 
     views = view_images(design, rig)

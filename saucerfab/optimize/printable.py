@@ -2,7 +2,7 @@
 
 A design knows its physical scale (``Scene.cup_diameter_mm``, so one model
 unit is ``Scene.mm_per_unit`` mm) and its printer (a profile from
-:mod:`saucerfab.profiles`, the J55 unless asked otherwise). Before
+:mod:`saucerfab.model.profiles`, the J55 unless asked otherwise). Before
 any optimization :func:`preflight` refuses what cannot be printed whatever
 the optimizer does (a part larger than the build volume at the worst heights
 the height bound allows, seat or base walls under the printer's minimum wall -
@@ -10,7 +10,7 @@ the seat's wall against the saucer by the export's own rule,
 :func:`saucerfab.fabricate.seat.seat_wall`, naming the smallest cup that works -
 a base shape whose crests cannot be made printable inside the bound), each
 with the fix. During the optimization :class:`CrestProjection` keeps every
-iterate within the printer's minimum feature and wall (:mod:`saucerfab.relief`), so
+iterate within the printer's minimum feature and wall (:mod:`saucerfab.model.relief`), so
 the finished design exports for that printer as it is.
 """
 
@@ -25,10 +25,10 @@ import numpy as np
 from saucerfab.errors import ConfigError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.seat import seat_wall
-from saucerfab.profiles import DEFAULT_PRINTER, PrinterProfile, load_profile
-from saucerfab.heightfield import make_grid
-from saucerfab.relief import OPTIMIZER_TIGHTEN, blunt_thin_crests
-from saucerfab.scene import Scene
+from saucerfab.model.heightfield import make_grid
+from saucerfab.model.profiles import DEFAULT_PRINTER, PrinterProfile, load_profile
+from saucerfab.model.relief import OPTIMIZER_TIGHTEN, blunt_thin_crests
+from saucerfab.model.scene import Scene
 
 #: share of delta kept between a projected vertex and its bound (the solver's
 #: barrier needs iterates strictly inside the box)
@@ -216,8 +216,8 @@ class CrestProjection:
         self._lo = self.base - d * (1.0 - BOUND_MARGIN)
         self._hi = self.base + d * (1.0 - BOUND_MARGIN)
 
-    def blunt(self, heights: np.ndarray):  # -> saucerfab.relief.BluntResult
-        """:func:`saucerfab.relief.blunt_thin_crests` of (N, N) ``heights`` within this design's bounds."""
+    def blunt(self, heights: np.ndarray):  # -> saucerfab.model.relief.BluntResult
+        """:func:`saucerfab.model.relief.blunt_thin_crests` of (N, N) ``heights`` within this design's bounds."""
         h = np.asarray(heights, np.float64).reshape(self._n, self._n)
         # a vertex already nearer its bound than the margin may stay where it is
         lo = np.minimum(self._lo, h)
@@ -255,7 +255,7 @@ class CrestProjection:
 
 def printable_metrics(target: PrintTarget, heights: np.ndarray, project: Any) -> dict[str, Any]:
     """The final heights against the printer's minimum feature (``metrics.printable`` of design.json)."""
-    from saucerfab.relief import WALL_MARGIN, crest_widths, wall_widths
+    from saucerfab.model.relief import WALL_MARGIN, crest_widths, wall_widths
 
     dx, dy = target.spacing_mm
     hmm = np.asarray(heights) * target.mm_per_unit

@@ -18,11 +18,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from saucerfab.cups import PrismCup
 from saucerfab.errors import ConfigError
-from saucerfab.mirror import seen_by_piece
-from saucerfab.reflection import facet_frames, wrap_angle
-from saucerfab.scene import Scene
+from saucerfab.model.cups import PrismCup
+from saucerfab.model.mirror import seen_by_piece
+from saucerfab.model.reflection import facet_frames, wrap_angle
+from saucerfab.model.scene import Scene
 
 
 def split_reflected_facets(scene: Scene, heights: np.ndarray | None = None) -> list[list[int]]:
@@ -31,7 +31,7 @@ def split_reflected_facets(scene: Scene, heights: np.ndarray | None = None) -> l
     The facets the camera sees form a chain around the outline; the split
     is between two neighbours of that chain (so each image is seen in one
     connected part of the cup), at the cut where the saucer regions the two
-    groups reflect (in frame, see :func:`saucerfab.mirror.visible_region`) overlap least,
+    groups reflect (in frame, see :func:`saucerfab.model.mirror.visible_region`) overlap least,
     the more even split on a tie. A sample in both regions would have to
     show both images, so the overlap is what the designs must compromise on;
     :func:`facet_groups_overlap` reports it.

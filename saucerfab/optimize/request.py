@@ -8,19 +8,24 @@ energy terms (:data:`saucerfab.optimize.energies.WEIGHTS`).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
-from dataclasses import dataclass, field, make_dataclass
+import types
+import typing
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields, make_dataclass
 from pathlib import Path
+from typing import Any, Literal
 
-from saucerfab.errors import ConfigError
-from saucerfab.eyes import DEFAULT_IPD_MM, EYES_USAGE, OLD_DESIGN_EYE_NAME, EyeSpec, parse_eyes
-from saucerfab.heightfield import HEIGHT_SCALE
-from saucerfab.fitting import FITS
+from saucerfab.errors import ConfigError, SaucerfabError
+from saucerfab.imaging.fitting import FITS
+from saucerfab.model.eyes import DEFAULT_IPD_MM, EYES_USAGE, OLD_DESIGN_EYE_NAME, EyeSpec, parse_eyes
+from saucerfab.model.heightfield import HEIGHT_SCALE
+from saucerfab.model.profiles import DEFAULT_PRINTER
+from saucerfab.model.scene import VIEW_NAMES
 from saucerfab.optimize.energies import WEIGHTS
 from saucerfab.optimize.stages import ABLATION_STAGES, METHODS, check_weights, stage_cap, stages_for, stall_window
-from saucerfab.profiles import DEFAULT_PRINTER
-from saucerfab.scene import VIEW_NAMES
 
 #: the request's image fields: one picture per view, and its optional foreground mask
 IMAGE_ROLES = VIEW_NAMES + tuple(f"{v}_mask" for v in VIEW_NAMES)
@@ -119,7 +124,7 @@ class DesignRequest(_Weights):
         fit: what of each picture its frame shows, at that part's own aspect (a wide
             picture gets a wide frame: :mod:`saucerfab.optimize.framing`): "pad" (the
             whole picture) or "crop" (cut to its content: the box of what differs from
-            its background, :func:`saucerfab.fitting.crop_to_content`); one rule for all,
+            its background, :func:`saucerfab.imaging.fitting.crop_to_content`); one rule for all,
             or per picture as "direct=crop,reflected=pad".
         background: "#rrggbb" of the padding and of what transparent areas
             show; None: each picture's border colour (median of its outer ring).
@@ -141,7 +146,7 @@ class DesignRequest(_Weights):
             prism to the placement whose facet regions overlap least
             (:func:`saucerfab.optimize.regions.best_placement`); "as_given"
             keeps the cup's rotation.
-        eyes: where the design is optimised for (:mod:`saucerfab.eyes`, one definition
+        eyes: where the design is optimised for (:mod:`saucerfab.model.eyes`, one definition
             with ``saucerfab verify``): "design" (the paper: the design eye alone;
             "point", its older name, is read as "design"),
             "both" (the design eye and a viewer's two eyes, ``ipd_mm`` apart along the
@@ -149,7 +154,7 @@ class DesignRequest(_Weights):
             around the design eye). Millimetres at the design's scale
             (``cup_diameter_mm``). E_visual sums over the eyes, each with its own
             direct and reflected views (:mod:`saucerfab.optimize.viewpoints`,
-            weights :func:`saucerfab.eyes.eye_weights`), and the texturing blends
+            weights :func:`saucerfab.model.eyes.eye_weights`), and the texturing blends
             what each eye wants. Measured in benchmarks/RESULTS.md (Eyes).
         surround_weight: the weight of the whole view around the frames
             (:mod:`saucerfab.optimize.surround`): the saucer seen directly outside the
@@ -159,7 +164,7 @@ class DesignRequest(_Weights):
             default): :data:`SURROUND_WEIGHT` for the full method, 0 for an ablation (Figure 11's
             settings are the paper's energies; a weight given with one is refused).
         ipd_mm: the distance between a viewer's eyes with ``eyes="both"`` (None: 64 mm,
-            :data:`saucerfab.eyes.DEFAULT_IPD_MM`); refused with the other modes.
+            :data:`saucerfab.model.eyes.DEFAULT_IPD_MM`); refused with the other modes.
     """
 
     direct: Path
@@ -227,7 +232,7 @@ class DesignRequest(_Weights):
         stages_for(self.ablation, self.method)  # refuses an unknown method, and fast with an ablation
         self.fit_by_view()  # refuses a bad --fit now, before any work
         if self.background is not None:
-            from saucerfab.images import parse_colour
+            from saucerfab.imaging.images import parse_colour
 
             parse_colour(self.background)
         if self.enhancement not in ENHANCEMENTS:
@@ -310,3 +315,237 @@ class DesignRequest(_Weights):
     def default(cls, name: str) -> object:
         """The default of field ``name`` (for ``--help`` texts), e.g. ``DesignRequest.default("max_iters")``."""
         return cls.__dataclass_fields__[name].default
+
+    @classmethod
+    def from_options(
+        cls,
+        options: Mapping[str, object],
+        *,
+        where: OptionsDoor,
+        allowed: frozenset[str] | None = None,
+        inputs: Mapping[str, object] | None = None,
+        error: type[SaucerfabError] = ConfigError,
+    ) -> DesignRequest:
+        """The request of a mapping of options (a manifest's ``design_options``, the studio's form).
+
+        Args:
+            options: field name -> value as the front door read it (TOML, CSV, JSON values);
+                checked and converted by :func:`checked_options`.
+            where: the front door (:data:`OptionsDoor`): its messages, and which errors
+                of building the request it rewords (:data:`_DOORS`).
+            allowed: the fields ``options`` may set; None: every field.
+            inputs: fields the front door resolved itself (image paths, an uploaded
+                shape's path), laid over ``options`` unchecked.
+            error: the class of every refusal (the studio's, say).
+
+        Raises:
+            SaucerfabError: an unknown field, a value of the wrong type (as ``error``), or
+                a value the request refuses (as the request raised it, or as ``error``
+                with the door's prefix).
+        """
+        door = _DOORS[where]
+        kwargs = checked_options(options, where=where, allowed=allowed, error=error)
+        try:
+            return cls(**{**kwargs, **(inputs or {})})
+        except door.build_errors as exc:
+            raise error(f"{door.build_prefix}{exc}") from None
+
+
+# --------------------------------------------------------------------------- options from a front door
+
+#: the front doors that turn a mapping of options into a request: the batch
+#: manifest's ``design_options`` and the studio's run form
+OptionsDoor = Literal["manifest", "studio"]
+
+
+@dataclass(frozen=True)
+class _Door:
+    """How one front door takes a mapping of design options, and words what it refuses.
+
+    Attributes:
+        words: what a value of each kind (``bool``, ``int``, ``float``, ``str``, ``path``) must be, in
+            the door's messages.
+        text_max: the longest text a ``str`` option takes, in characters; None: any.
+        finite: refuse NaN and infinities at the type check; False leaves them to the request's own checks.
+        paths_as_text: a ``Path`` option must be a text (the studio's upload id), not any path-like object.
+        all_at_once: every unknown name in one message, else every mistyped option in one (sorted by
+            name); False: the first problem in the order given, alone.
+        unknown: the message for the unknown names (in the order given) and the names known.
+        mistyped: the message for the mistyped options, each (name, what it must be, value).
+        build_errors: errors of building the request that are reworded as ``build_prefix`` + message;
+            any other passes as the request raised it.
+        build_prefix: see ``build_errors``.
+    """
+
+    words: dict[str, str]
+    text_max: int | None
+    finite: bool
+    paths_as_text: bool
+    all_at_once: bool
+    unknown: Callable[[list[str], Mapping[str, object]], str]
+    mistyped: Callable[[list[tuple[str, str, object]]], str]
+    build_errors: tuple[type[Exception], ...]
+    build_prefix: str
+
+
+_TYPE_WORDS = {"bool": "true or false", "int": "a whole number", "float": "a number"}
+#: each door's messages are the ones it gave before the doors shared this check
+#: (tests/batch and tests/studio pin them)
+_DOORS: dict[str, _Door] = {
+    # a manifest is fixed in an editor: every mistake is listed at once, with the manifest's key
+    "manifest": _Door(
+        words={**_TYPE_WORDS, "str": "a string", "path": "a path"},
+        text_max=None,
+        finite=False,
+        paths_as_text=False,
+        all_at_once=True,
+        unknown=lambda names, known: f"unknown design option(s) {sorted(names)}; allowed: {sorted(known)}",
+        mistyped=lambda bad: "design_options: " + "; ".join(f"{n} must be {w}, got {v!r}" for n, w, v in bad),
+        build_errors=(SaucerfabError, TypeError),
+        build_prefix="design_options: ",
+    ),
+    # a form sends JSON: NaN is a JSON number to Python, and a text has a bound (it is recorded and shown)
+    "studio": _Door(
+        words={**_TYPE_WORDS, "str": "a short text", "path": "an upload id"},
+        text_max=200,
+        finite=True,
+        paths_as_text=True,
+        all_at_once=False,
+        unknown=lambda names, known: f"unknown option {names[0]!r}; the options are: {', '.join(sorted(known))}",
+        mistyped=lambda bad: "; ".join(f"option {n!r} must be {w}, got {v!r}" for n, w, v in bad),
+        build_errors=(TypeError, ValueError),  # a value the dataclass could not even compare
+        build_prefix="bad design options: ",
+    ),
+}
+
+
+@functools.lru_cache(maxsize=1)
+def _request_hints() -> dict[str, Any]:
+    """:class:`DesignRequest`'s init fields -> their annotations, evaluated once (get_type_hints is slow)."""
+    hints = typing.get_type_hints(DesignRequest)
+    return {f.name: hints[f.name] for f in fields(DesignRequest) if f.init}
+
+
+def _fit(value: object, hint: Any, door: _Door) -> tuple[object, str | None]:
+    """(``value`` converted, None) when it fits the annotation ``hint``, else (``value``, what it must be).
+
+    Covers the annotations of :class:`DesignRequest` (``bool``, ``int``, ``float``, ``str``,
+    ``Path``, ``X | None``) and ``tuple[X, ...]`` / ``tuple[X, Y]`` (a list or tuple, item by
+    item, made a tuple). TOML, CSV and JSON values are plain, so nothing more is needed. A
+    whole number is a number (``height_scale = 1``, made 1.0); a bool is neither (Python's
+    bool is an int). Any other annotation lets the value through: the request's own checks
+    judge it.
+    """
+    origin = typing.get_origin(hint)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(hint)
+        if value is None and type(None) in args:
+            return None, None
+        wants = []
+        for arg in args:
+            if arg is not type(None):
+                fitted, want = _fit(value, arg, door)
+                if want is None:
+                    return fitted, None
+                wants.append(want)
+        return value, " or ".join(wants)
+    if origin is tuple:
+        return _fit_tuple(value, typing.get_args(hint), door)
+    if hint is bool:
+        return (value, None) if isinstance(value, bool) else (value, door.words["bool"])
+    if hint is int:
+        return (value, None) if isinstance(value, int) and not isinstance(value, bool) else (value, door.words["int"])
+    if hint is float:
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            return value, door.words["float"]
+        try:
+            number = float(value)
+        except OverflowError:  # a whole number past float's range (JSON allows any length)
+            return value, door.words["float"]
+        if door.finite and not math.isfinite(number):
+            return value, door.words["float"]
+        return number, None
+    if hint is str:
+        fits = isinstance(value, str) and (door.text_max is None or len(value) <= door.text_max)
+        return (value, None) if fits else (value, door.words["str"])
+    if hint is Path:  # kept as given: DesignRequest makes it a Path, the studio records its upload id
+        fits = isinstance(value, str) or (not door.paths_as_text and isinstance(value, os.PathLike))
+        return (value, None) if fits else (value, door.words["path"])
+    return value, None
+
+
+def _fit_tuple(value: object, args: tuple[Any, ...], door: _Door) -> tuple[object, str | None]:
+    """:func:`_fit` for ``tuple[X, ...]`` (``args`` ``(X, Ellipsis)``) and ``tuple[X, Y, ...]`` (fixed length)."""
+    variadic = len(args) == 2 and args[1] is Ellipsis
+    items = [args[0]] if variadic else list(args)
+    wants = [_fit(None, a, door)[1] or "none" for a in items]  # what each item must be, for the message
+    want = f"a list, each item {wants[0]}" if variadic else f"a list of {len(items)} items ({', '.join(wants)})"
+    if not isinstance(value, (list, tuple)) or (not variadic and len(value) != len(items)):
+        return value, want
+    out = []
+    for i, item in enumerate(value):
+        fitted, problem = _fit(item, items[0] if variadic else items[i], door)
+        if problem is not None:
+            return value, want
+        out.append(fitted)
+    return tuple(out), None
+
+
+def checked_options(
+    options: Mapping[str, object],
+    *,
+    where: OptionsDoor,
+    allowed: frozenset[str] | None = None,
+    extra: Mapping[str, Any] | None = None,
+    error: type[SaucerfabError] = ConfigError,
+) -> dict[str, object]:
+    """``options`` checked against :class:`DesignRequest`'s fields and annotations, and converted.
+
+    The one check of every front door that takes design options as a mapping (the
+    batch manifest, the studio): the names (an unknown one is refused with the
+    names known), the value types by the field annotations (:func:`_fit`: a bool is
+    not a whole number, a text is not a number, None only where the field is
+    Optional, a list where it is a tuple) and the conversion (a whole number given
+    for a number becomes a float, a list for a tuple a tuple). The values themselves
+    (ranges, choices) are the request's to judge: :meth:`DesignRequest.from_options`.
+
+    Args:
+        options: field name -> value, as the front door read it.
+        where: the front door (:data:`OptionsDoor`); its messages (:data:`_DOORS`).
+        allowed: the fields ``options`` may set; None: every init field.
+        extra: the front door's own options (name -> annotation), checked and returned
+            the same way (an ``object`` annotation takes any value).
+        error: the class of the refusal.
+
+    Returns:
+        The options, converted, in the order given.
+
+    Raises:
+        SaucerfabError: as ``error``: unknown names, else values of the wrong type
+            (all at once or the first, as the door says).
+    """
+    door = _DOORS[where]
+    fields_hints = _request_hints()
+    names = fields_hints.keys() if allowed is None else allowed
+    if strange := sorted(set(names) - fields_hints.keys()):  # a caller's mistake, not the user's
+        raise ValueError(f"allowed names fields DesignRequest does not have: {strange}")
+    hints = {**{n: fields_hints[n] for n in names}, **(extra or {})}
+    out: dict[str, object] = {}
+    unknown: list[str] = []
+    mistyped: list[tuple[str, str, object]] = []
+    for name, value in options.items():
+        if name not in hints:
+            unknown.append(name)
+        else:
+            fitted, want = _fit(value, hints[name], door)
+            if want is None:
+                out[name] = fitted
+            else:
+                mistyped.append((name, want, value))
+        if (unknown or mistyped) and not door.all_at_once:
+            break
+    if unknown:
+        raise error(door.unknown(unknown, hints))
+    if mistyped:
+        raise error(door.mistyped(sorted(mistyped, key=lambda m: m[0])))
+    return out

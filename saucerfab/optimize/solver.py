@@ -208,7 +208,7 @@ def solve(
         callback: called after each accepted iteration with (iteration, energy, parts).
         should_stop: polled each iteration (e.g. a time budget); True ends the stage.
         project: maps trial heights (V,) onto a constraint set the box cannot
-            express (the printer's minimum feature, :mod:`saucerfab.relief`),
+            express (the printer's minimum feature, :mod:`saucerfab.model.relief`),
             keeping them inside the box; every trial is projected before it is
             judged, so every accepted iterate is in the set (projected line
             search). ``h0`` must already be in it.

@@ -24,7 +24,7 @@ rectangle), so ``surround_weight = 1``
 (the default) counts a square millimetre around a picture as much as one
 inside it.
 
-The background of a view is what :func:`saucerfab.images.intended_background`
+The background of a view is what :func:`saucerfab.imaging.images.intended_background`
 says of the picture the stage aims at: the design's ``--background``, else
 the picture's border colour (for the black-white enhanced targets, their own
 background). With it in the energy the conflict reduction also hides each
@@ -45,8 +45,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from saucerfab.model.camera import Camera
 from saucerfab.optimize.views import BACKGROUND, ViewMesh, ViewMeshes, frame_extent
-from saucerfab.render.camera import Camera
 
 if TYPE_CHECKING:
     import torch
@@ -113,7 +113,7 @@ class WholeView:
         frame: the frame view (a :class:`~saucerfab.optimize.views.ViewMesh` or ``View``).
         camera: the whole view's camera (:func:`whole_camera`).
         weights: (S, S) float64 pixel weights, :func:`outside_weights`.
-        extent: the frame's picture rectangle in its square (:attr:`saucerfab.scene.ViewFrame.extent`).
+        extent: the frame's picture rectangle in its square (:attr:`saucerfab.model.scene.ViewFrame.extent`).
     """
 
     frame: Any
@@ -211,8 +211,8 @@ def whole_targets(wholes: list[WholeView], heights: np.ndarray, pictures: dict[s
 
 
 def backgrounds_of(pictures: dict[str, np.ndarray], background: Any = None) -> dict[str, np.ndarray]:
-    """View name -> (3,) the background meant around each picture (:func:`saucerfab.images.intended_background`)."""
-    from saucerfab.images import intended_background
+    """View name -> (3,) the background meant around each picture (:func:`saucerfab.imaging.images.intended_background`)."""
+    from saucerfab.imaging.images import intended_background
 
     return {name: np.asarray(intended_background(np.asarray(img, np.float64), background), np.float64)
             for name, img in pictures.items()}

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.design import FRAMED_VIEWS, FaceView
+from saucerfab.model.design import FRAMED_VIEWS, FaceView
 from saucerfab.optimize.targets import sample_bilinear
 from saucerfab.optimize.views import Rig, visible_faces
 from saucerfab.render.texels import raster_triangles_2d
@@ -73,7 +73,7 @@ class EyeViews:
     """A moved eye for :func:`texture_saucer`: its views and where each of its vertices shows the pictures.
 
     Attributes:
-        weight: the eye's weight in the blend (:func:`saucerfab.eyes.eye_weights`).
+        weight: the eye's weight in the blend (:func:`saucerfab.model.eyes.eye_weights`).
         rig: the eye's views (:class:`~saucerfab.optimize.views.ViewMeshes` or a Rig).
         coords: view name -> (V', 2) NDC in the design eye's frame of that view, per vertex of the eye's
             view at the final heights (:func:`saucerfab.optimize.viewpoints.design_frame_ndc`).

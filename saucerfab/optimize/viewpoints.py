@@ -1,6 +1,6 @@
 """The eyes a design is made for (``saucerfab design --eyes``): a view rig per eye, and what each eye should see.
 
-The eyes are :mod:`saucerfab.eyes`'s, the ones ``saucerfab verify`` renders
+The eyes are :mod:`saucerfab.model.eyes`'s, the ones ``saucerfab verify`` renders
 from: the design eye (the scene's camera), and with ``both`` a viewer's two
 eyes ``ipd_mm`` apart along the direct view's right axis, with ``box`` a grid.
 Each eye is the design's scene with the camera moved there and the view
@@ -41,11 +41,10 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.eyes import Eye, EyeSpec, eye_positions, eye_weights
+from saucerfab.model.camera import Camera
+from saucerfab.model.eyes import Eye, EyeSpec, eye_positions, eye_weights
+from saucerfab.model.scene import Scene
 from saucerfab.optimize.views import BACKGROUND, ViewMesh, ViewMeshes
-from saucerfab.render.camera import Camera
-from saucerfab.scene import Scene
-
 
 #: a moved eye's views are rendered at this share of the design eye's image size: the optimizer's
 #: cost per moved eye falls about fourfold (--eyes both: about 1.5x the design eye's time per
@@ -60,7 +59,7 @@ class EyeRig:
 
     Attributes:
         eye: name, position (model units) and offset (mm) from the design eye.
-        weight: its share of E_visual and of the texture blend (:func:`saucerfab.eyes.eye_weights`).
+        weight: its share of E_visual and of the texture blend (:func:`saucerfab.model.eyes.eye_weights`).
         scene: the design's scene seen from this eye (the frames unchanged).
         rig: its views (a :class:`~saucerfab.optimize.views.Rig`, or the numpy
             :class:`~saucerfab.optimize.views.ViewMeshes`).
@@ -138,7 +137,7 @@ def design_frame_ndc(design: Scene, eye_scene: Scene, view: ViewMesh, heights: n
         view: a view of the eye's rig (its ``mirror`` set for a mirror view).
         heights: (N, N) or (V,) saucer heights, model units. z0: the decal's plane.
     """
-    from saucerfab.mirror import reflect
+    from saucerfab.model.mirror import reflect
 
     verts = view.vertices_np(heights)
     cam = Camera.from_scene(design, view.name)

@@ -1,7 +1,7 @@
 """The view rig: the saucer seen directly and in the mirror, as meshes to rasterize.
 
 Since vertices move only in z and the cup is a vertical cylinder, the
-reflected xy of every saucer vertex is computed once (:mod:`saucerfab.mirror`);
+reflected xy of every saucer vertex is computed once (:mod:`saucerfab.model.mirror`);
 a reflected vertex is ``(r_x, r_y, h)`` with the saucer vertex's height. Each
 view is therefore a fixed xy array, a gather index into ``h``, a face list and
 a gather index into the per-face colours ``c``, so rendering a view is one
@@ -20,9 +20,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from saucerfab.heightfield import make_grid, triangulate
-from saucerfab.render.camera import Camera
-from saucerfab.scene import Scene
+from saucerfab.model.camera import Camera
+from saucerfab.model.heightfield import make_grid, triangulate
+from saucerfab.model.scene import Scene
 
 if TYPE_CHECKING:
     import torch
@@ -104,7 +104,7 @@ class ViewMeshes:
         image_size: int | None = None,
         reflected_groups: list[list[int]] | None = None,
     ) -> None:
-        from saucerfab.mirror import reflect
+        from saucerfab.model.mirror import reflect
 
         self.scene = scene
         n = scene.saucer.resolution

@@ -1,6 +1,6 @@
 """Rendering: the camera convention, the differentiable soft rasterizer, hard previews.
 
-* :class:`Camera` - the one camera/NDC/pixel convention (:mod:`saucerfab.render.camera`).
+* :class:`Camera` - the one camera/NDC/pixel convention (:mod:`saucerfab.model.camera`).
 * :func:`soft_rasterize` - SoftRas soft rasterizer with gradients (:mod:`saucerfab.render.soft`,
   the op and the dispatch; its constants and parameters in :mod:`saucerfab.render.soft_common`);
   backends: compiled numba CPU kernels (:mod:`saucerfab.render.soft_numba`, the per-face
@@ -13,7 +13,7 @@
   the texels under 2-D triangles the texturing and the export's paint share (:mod:`saucerfab.render.texels`).
 
 Only the camera is imported with the package; the rasterizers (and numba,
-torch) load on first use, so ``from saucerfab.render.camera import Camera``
+torch) load on first use, so ``from saucerfab.model.camera import Camera``
 stays cheap.
 
 Importing saucerfab (this package's parent) sets how torch's OpenMP workers
@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from saucerfab.render.camera import Camera
+from saucerfab.model.camera import Camera
 
 __all__ = ["Camera", "rasterize_hard", "render_face_colors_hard", "render_textured", "soft_rasterize"]
 

@@ -1,6 +1,6 @@
 """Hard rasterization (nearest face wins, no gradients): previews and visibility.
 
-The camera, NDC and pixel conventions are :mod:`saucerfab.render.camera`'s:
+The camera, NDC and pixel conventions are :mod:`saucerfab.model.camera`'s:
 pixel (i, j) samples the NDC point ``((2j + 1)/S - 1, 1 - (2i + 1)/S)``.
 
 A pixel centre is covered by a face when its screen-space barycentric
@@ -35,7 +35,7 @@ import numpy as np
 from numba import njit, prange
 
 from saucerfab.errors import ConfigError
-from saucerfab.render.camera import Camera
+from saucerfab.model.camera import Camera
 from saucerfab.render.sampling import sample_bilinear
 
 #: rows per band of the image that one thread owns whole

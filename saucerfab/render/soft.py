@@ -4,7 +4,7 @@ Semantics are those of SoftRas (Liu et al. 2019), as its CUDA kernel
 ``soft_rasterize_cuda_kernel.cu`` computes them with the defaults of its
 ``soft_rasterize`` (``dist_func='euclidean'``, ``aggr_func_rgb='softmax'``,
 ``aggr_func_alpha='prod'``, ``fill_back=True``, per-face colours). For one
-pixel centre ``p`` (NDC, see :mod:`saucerfab.render.camera`) and one face
+pixel centre ``p`` (NDC, see :mod:`saucerfab.model.camera`) and one face
 ``f`` with projected corners ``(x_k, y_k, z_k)`` (``z_k`` = camera depth):
 
 1. ``w`` = barycentric coordinates of ``p`` from the inverse of the 3x3
@@ -52,7 +52,7 @@ Constants taken from SoftRas, all of them:
   (:data:`WSUM_EPS`);
 * the running softmax's start: sum ``exp(eps / gamma)``, maximum ``eps``;
 * pixel centres ``x = (2 j + 1 - S) / S``, ``y = (2 (S - 1 - i) + 1 - S) / S``
-  for image row ``i``: the same as :mod:`saucerfab.render.camera`'s
+  for image row ``i``: the same as :mod:`saucerfab.model.camera`'s
   convention (row 0 at the top).
 """
 
@@ -67,7 +67,7 @@ from saucerfab.render.soft_common import DEFAULTS, DET_EPS, WSUM_EPS, SoftParams
 if TYPE_CHECKING:
     import torch
 
-    from saucerfab.render.camera import Camera
+    from saucerfab.model.camera import Camera
 
 __all__ = ["DET_EPS", "WSUM_EPS", "Backend", "SoftParams", "distance_threshold", "select_backend", "soft_rasterize"]
 
@@ -181,7 +181,7 @@ def soft_rasterize(
     The formulas and every constant taken from SoftRas are listed in the
     module docstring of :mod:`saucerfab.render.soft`. The camera convention
     (projection, row 0 at the top, pixel centres) is
-    :mod:`saucerfab.render.camera`'s.
+    :mod:`saucerfab.model.camera`'s.
 
     Args:
         vertices: World positions, shape [V, 3], model units, float32 or

@@ -34,7 +34,7 @@ from saucerfab.render.soft_tiles import JIT_OPTS, N_GRAD, make_bins, one_tile_ch
 if TYPE_CHECKING:
     import torch
 
-    from saucerfab.render.camera import Camera
+    from saucerfab.model.camera import Camera
 
 
 # --------------------------------------------------------------------------- per-face setup and chain rule

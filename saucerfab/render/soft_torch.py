@@ -19,7 +19,7 @@ from saucerfab.render.soft_common import DEFAULTS, DET_EPS, WSUM_EPS, SoftParams
 if TYPE_CHECKING:
     import torch
 
-    from saucerfab.render.camera import Camera
+    from saucerfab.model.camera import Camera
 
 
 def face_pixel_boxes(

@@ -34,7 +34,7 @@ from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
 from saucerfab.errors import SaucerfabError
-from saucerfab.labels import api_labels
+from saucerfab.pages.labels import api_labels
 from saucerfab.studio import options as opts
 from saucerfab.studio.guard import LOOPBACK_NAMES, HostOriginGuard
 from saucerfab.studio.jobs import DEFAULT_JOBS, Job, JobQueue
@@ -117,14 +117,14 @@ def create_app(
         jobs: designs and exports run at once (worker processes).
         max_upload_bytes: the largest upload, bytes (more is 413).
         max_pixels: the largest picture accepted, width x height
-            (default: :data:`saucerfab.images.DEFAULT_MAX_PIXELS`).
+            (default: :data:`saucerfab.imaging.images.DEFAULT_MAX_PIXELS`).
         grace_s: seconds a cancelled worker has to stop before it is killed.
         allowed_hosts: the names accepted in a request's ``Host`` (loopback by
             default; None: any, for a studio shared on the network); requests
             from another site's page are refused either way
             (:mod:`saucerfab.studio.guard`).
     """
-    from saucerfab.images import DEFAULT_MAX_PIXELS
+    from saucerfab.imaging.images import DEFAULT_MAX_PIXELS
 
     ws = Workspace(workspace)
     queue = JobQueue(ws, jobs=jobs) if grace_s is None else JobQueue(ws, jobs=jobs, grace_s=grace_s)
@@ -212,7 +212,7 @@ def create_app(
         return FileResponse(d / "thumb.png", media_type="image/png", headers={"Cache-Control": "max-age=86400"})
 
     async def upload_fitted(request: Request) -> Response:
-        from saucerfab.fitting import FITS
+        from saucerfab.imaging.fitting import FITS
 
         upload_id = request.path_params["id"]
         q = request.query_params
@@ -336,8 +336,8 @@ def create_app(
     # ------------------------------------------------------------------ exports
 
     async def start_export(request: Request) -> Response:
-        from saucerfab.formats import FORMATS
-        from saucerfab.profiles import list_profiles
+        from saucerfab.files.formats import FORMATS
+        from saucerfab.model.profiles import list_profiles
 
         run_id = request.path_params["id"]
         body = await _body_json(request)
@@ -483,9 +483,9 @@ def _fitted_png(ws: Workspace, upload_id: str, fit: str, background: str | None,
     """An uploaded picture fitted into its square frame as the design fits it, as PNG bytes."""
     import numpy as np
 
-    from saucerfab.fitting import fit_square
-    from saucerfab.images import estimate_background, flatten_alpha, load_image, parse_colour
-    from saucerfab.imageio import png_bytes
+    from saucerfab.files.imageio import png_bytes
+    from saucerfab.imaging.fitting import fit_square
+    from saucerfab.imaging.images import estimate_background, flatten_alpha, load_image, parse_colour
 
     rec = ws.upload_record(upload_id)
     if rec.get("kind") != "image":

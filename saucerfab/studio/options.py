@@ -10,12 +10,15 @@ three differences a web client needs:
   cannot make the server read a file of its choosing);
 * two studio switches: ``title`` (the run's name in the history) and
   ``verify`` (the quick verify of a trial export after the design, default true).
+
+The names and value types are checked, and the options turned into a request, by
+the one conversion the batch manifest uses too
+(:func:`saucerfab.optimize.request.checked_options`,
+:meth:`~saucerfab.optimize.request.DesignRequest.from_options`), in the studio's words.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import fields
 from typing import Any
 
 from saucerfab.errors import ConfigError
@@ -25,6 +28,10 @@ from saucerfab.studio.workspace import UPLOAD_ID_RE, NotFound, StudioError, Work
 UPLOAD_FIELDS = ("direct", "reflected", "reflected2", "direct_mask", "reflected_mask", "reflected2_mask")
 #: the studio's own switches (not DesignRequest fields), with their defaults
 STUDIO_SWITCHES: dict[str, Any] = {"verify": True}
+#: the options besides DesignRequest's fields, by annotation: the switches (of their
+#: default's type) and the run's title (any value: one that is no text gives way to
+#: the pictures' names)
+_STUDIO_OPTIONS: dict[str, Any] = {**{k: type(v) for k, v in STUDIO_SWITCHES.items()}, "title": object}
 #: what each fit rule does, in a sentence (for the page's choices)
 FIT_RULES = {
     "pad": "the whole picture is shown; its frame takes its shape (a wide picture, a wide frame)",
@@ -32,31 +39,15 @@ FIT_RULES = {
 }
 
 
-def _kind(annotation: object) -> str:
-    """``"int"``, ``"float"``, ``"bool"``, ``"str"`` or ``"upload"`` from a DesignRequest field's annotation."""
-    text = annotation if isinstance(annotation, str) else repr(annotation)
-    for key, kind in (("Path", "upload"), ("bool", "bool"), ("int", "int"), ("float", "float")):
-        if key in text:
-            return kind
-    return "str"
-
-
-def _fields() -> dict[str, str]:
-    """DesignRequest field name -> its kind."""
-    from saucerfab.optimize.request import DesignRequest
-
-    return {f.name: _kind(f.type) for f in fields(DesignRequest)}
-
-
 def option_choices() -> dict[str, Any]:
     """What ``GET /api/options`` answers (less the limits and samples, which the app adds)."""
-    from saucerfab.cups import CUP_CLASSES
-    from saucerfab.heightfield import BASE_SHAPES
-    from saucerfab.fitting import FITS
+    from saucerfab.imaging.fitting import FITS
+    from saucerfab.model.cups import CUP_CLASSES
+    from saucerfab.model.heightfield import BASE_SHAPES
+    from saucerfab.model.profiles import list_profiles
+    from saucerfab.model.scene import paper_scene
     from saucerfab.optimize.request import ENHANCEMENTS, FRAMES, METHODS, DesignRequest
     from saucerfab.optimize.stages import STAGE_CAPS
-    from saucerfab.profiles import list_profiles
-    from saucerfab.scene import paper_scene
 
     if set(FIT_RULES) != set(FITS):  # a new fit rule needs its sentence here
         raise RuntimeError(f"FIT_RULES covers {sorted(FIT_RULES)} but the fit rules are {FITS}")
@@ -88,22 +79,6 @@ def option_choices() -> dict[str, Any]:
     }
 
 
-def _typed(name: str, kind: str, value: Any) -> Any:
-    """``value`` checked against the option's kind (JSON numbers, strings, booleans)."""
-    ok = {
-        "int": isinstance(value, int) and not isinstance(value, bool),
-        "float": isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value),
-        "bool": isinstance(value, bool),
-        "str": isinstance(value, str) and len(value) <= 200,
-        "upload": isinstance(value, str),
-    }[kind]
-    if not ok:
-        want = {"int": "a whole number", "float": "a number", "bool": "true or false", "str": "a short text",
-                "upload": "an upload id"}[kind]
-        raise StudioError(f"option {name!r} must be {want}, got {value!r}")
-    return float(value) if kind == "float" else value
-
-
 def check_options(ws: Workspace, body: Any) -> tuple[dict[str, Any], str]:
     """The client's options checked for form (names, types, upload ids): (options to record, title).
 
@@ -111,21 +86,14 @@ def check_options(ws: Workspace, body: Any) -> tuple[dict[str, Any], str]:
         StudioError: not an object, an unknown option, a wrong type, a missing picture.
         NotFound: an upload id the workspace does not hold.
     """
+    from saucerfab.optimize.request import checked_options
+
     if not isinstance(body, dict):
         raise StudioError('the run options must be a JSON object, e.g. {"direct": UPLOAD_ID, "reflected": UPLOAD_ID}')
-    kinds = _fields()
-    options: dict[str, Any] = {}
     title = body.get("title")
-    for name, value in body.items():
-        if name == "title" or value is None:
-            continue
-        if name in STUDIO_SWITCHES:
-            options[name] = _typed(name, "bool", value)
-            continue
-        if name not in kinds:
-            known = ", ".join(sorted([*kinds, *STUDIO_SWITCHES, "title"]))
-            raise StudioError(f"unknown option {name!r}; the options are: {known}")
-        options[name] = _typed(name, kinds[name], value)
+    given = {k: v for k, v in body.items() if v is not None}  # null: not given (as in merged_options)
+    options: dict[str, Any] = checked_options(given, where="studio", extra=_STUDIO_OPTIONS, error=StudioError)
+    options.pop("title", None)
     for name in ("direct", "reflected"):
         if name not in options:
             raise StudioError(f"a design needs a {name} picture: upload one and give its id as {name!r}")
@@ -151,19 +119,17 @@ def design_request(ws: Workspace, options: dict[str, Any]) -> Any:
             is not a preset, a printer that is not a bundled profile.
         NotFound: an upload that is gone.
     """
-    from saucerfab.heightfield import BASE_SHAPES
+    from saucerfab.model.heightfield import BASE_SHAPES
+    from saucerfab.model.profiles import list_profiles
+    from saucerfab.model.scene import PRESETS
     from saucerfab.optimize.request import DesignRequest
-    from saucerfab.profiles import list_profiles
-    from saucerfab.scene import PRESETS
 
     given = {k: v for k, v in options.items() if k not in STUDIO_SWITCHES}
-    for name in UPLOAD_FIELDS:
-        if name in given:
-            given[name] = ws.upload_path(given[name])
+    paths: dict[str, object] = {name: ws.upload_path(given[name]) for name in UPLOAD_FIELDS if name in given}
     shape = given.get("shape")
     if isinstance(shape, str):
         if UPLOAD_ID_RE.match(shape):
-            given["shape"] = str(ws.upload_path(shape))
+            paths["shape"] = str(ws.upload_path(shape))
         elif shape.replace("-", "_").lower() not in BASE_SHAPES:
             raise ConfigError(f"unknown base shape {shape!r}; built-in shapes are {sorted(BASE_SHAPES)}, or upload "
                               "a heightfield (.png or .npy) and give its upload id")
@@ -171,10 +137,7 @@ def design_request(ws: Workspace, options: dict[str, Any]) -> Any:
         raise ConfigError(f"unknown scene {given['scene']!r}; the studio's scenes are {sorted(PRESETS)}")
     if "printer" in given and given["printer"] not in list_profiles():
         raise ConfigError(f"unknown printer {given['printer']!r}; the printers are {sorted(list_profiles())}")
-    try:
-        return DesignRequest(**given)
-    except (TypeError, ValueError) as exc:  # a value the dataclass could not even compare
-        raise ConfigError(f"bad design options: {exc}") from None
+    return DesignRequest.from_options(given, where="studio", inputs=paths)
 
 
 def validate_run(ws: Workspace, options: dict[str, Any]) -> None:

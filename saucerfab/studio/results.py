@@ -11,7 +11,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from saucerfab.fileio import write_text_atomic
+from saucerfab.files.fileio import write_text_atomic
 
 #: the suffixes the file route serves, and their media types
 SERVED_SUFFIXES = {
@@ -112,9 +112,9 @@ def checks_summary(print_folder: Path) -> list[dict[str, Any]]:
     """check.json of a print folder, per file: {file, verdict, printable, counts, findings [{code, severity, message}]}.
 
     ``counts`` is {"error": n, "warning": n, "info": n} and ``counts_text`` says it in words, as the
-    print's report.html does (:func:`saucerfab.report_page.finding_counts`).
+    print's report.html does (:func:`saucerfab.pages.folder_pages.finding_counts`).
     """
-    from saucerfab.report_page import counts_text, finding_counts
+    from saucerfab.pages.folder_pages import counts_text, finding_counts
 
     doc = _json(print_folder / "check.json")
     out = []
@@ -150,15 +150,15 @@ def viewer_page(run_dir: Path) -> Path:
     """The run's 3D viewer page (cached as ``viewer.html``, made again when the design is newer); returns its path.
 
     A bare page for the studio's iframe: only the design report's own view
-    (:func:`saucerfab.report_page.design_viewer_section`: the designed saucer
+    (:func:`saucerfab.pages.folder_pages.design_viewer_section`: the designed saucer
     top with its mirror cup, three.js inline, no network), 480 px tall, no
     margins, no headings.
     """
     import html
 
-    from saucerfab.design import load_design
-    from saucerfab.labels import design_name
-    from saucerfab.report_page import design_viewer_section
+    from saucerfab.model.design_folder import load_design
+    from saucerfab.pages.folder_pages import design_viewer_section
+    from saucerfab.pages.labels import design_name
 
     design_dir = run_dir / "design"
     page = run_dir / VIEWER_NAME

@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from saucerfab.errors import ConfigError
-from saucerfab.fileio import exclusive_lock
+from saucerfab.files.fileio import exclusive_lock
 from saucerfab.studio.jobs import DEFAULT_JOBS
 from saucerfab.studio.workspace import MAX_UPLOAD_BYTES, Workspace
 

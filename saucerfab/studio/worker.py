@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from saucerfab.errors import Interrupted, SaucerfabError
-from saucerfab.fileio import write_bytes_atomic
+from saucerfab.files.fileio import write_bytes_atomic
 from saucerfab.studio.workspace import Workspace, now_iso, write_json
 
 #: the most progress.json writes a second (the page polls it through the event stream)
@@ -236,7 +236,7 @@ def _design_job(ws: Workspace, run_id: str, watch: _ParentWatch) -> None:
         out = folder / "design"
         reporter = _Reporter(folder, request, watch, ws.scrub)
         if not (out / "design.json").is_file():  # done before: a resume only has the verify left
-            from saucerfab.optimize.pipeline import run_design
+            from saucerfab.workflow import run_design
 
             run_design(request, out, progress=reporter.progress, look=reporter.look, log_every_s=1.0 / WRITES_PER_S)
         note = None
@@ -322,7 +322,7 @@ def _export_job(ws: Workspace, run_id: str, printer: str) -> None:
     try:
         from saucerfab.fabricate.options import FabOptions
         from saucerfab.fabricate.pipeline import export_lock
-        from saucerfab.profiles import load_profile
+        from saucerfab.model.profiles import load_profile
         from saucerfab.workflow import make_print
 
         entry = ws.read_run(run_id).get("exports", {}).get(printer, {})

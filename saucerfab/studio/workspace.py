@@ -3,7 +3,7 @@
 The layout is in ``saucerfab/studio/README.md``. Everything here is plain
 blocking file work, safe from several threads and processes at once:
 
-* every file is written atomically (:mod:`saucerfab.fileio`);
+* every file is written atomically (:mod:`saucerfab.files.fileio`);
 * a run's record (``run.json``) is only changed through :meth:`Workspace.update_run`,
   which holds the run's lock (``flock`` on ``runs/<id>/.lock``, so the server's
   threads and the worker processes take turns) around its read-modify-write;
@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from saucerfab.errors import ConfigError, ImageError, SaucerfabError, ShapeError
-from saucerfab.fileio import atomic_dir, write_bytes_atomic, write_text_atomic
+from saucerfab.files.fileio import atomic_dir, write_bytes_atomic, write_text_atomic
 
 #: the workspace marker's schema
 SCHEMA = "saucerfab.studio/1"
@@ -367,8 +367,8 @@ class Workspace:
         """Validate a received file and keep it as an upload; returns its record (``upload.json``).
 
         The file is read with the library's own loaders (the picture with
-        :func:`saucerfab.images.load_image` and its pixel limit, a shape with
-        :func:`saucerfab.heightfield.load_shape`), so what is refused here is
+        :func:`saucerfab.imaging.images.load_image` and its pixel limit, a shape with
+        :func:`saucerfab.model.heightfield.load_shape`), so what is refused here is
         what ``saucerfab design`` refuses, in its words. ``tmp`` is removed.
 
         Raises:
@@ -427,7 +427,7 @@ def _thumb_png(rgb: np.ndarray) -> bytes:
     """PNG bytes of an (H, W, 3) float picture in [0, 1], its longest side at most :data:`THUMB_PX`."""
     from PIL import Image
 
-    from saucerfab.imageio import png_bytes
+    from saucerfab.files.imageio import png_bytes
 
     im = Image.fromarray(np.clip(np.rint(rgb * 255), 0, 255).astype(np.uint8))
     im.thumbnail((THUMB_PX, THUMB_PX), Image.Resampling.LANCZOS)
@@ -443,7 +443,7 @@ def checker(h: int, w: int, cell: int = 8) -> np.ndarray:
 
 def _check_image(path: Path, role: str, max_pixels: int) -> tuple[dict[str, Any], bytes]:
     """Load a picture or mask as the design would: (width/height, thumbnail PNG)."""
-    from saucerfab.images import DEFAULT_MAX_BYTES, load_image
+    from saucerfab.imaging.images import DEFAULT_MAX_BYTES, load_image
 
     img = load_image(path, max_pixels=max_pixels, max_bytes=DEFAULT_MAX_BYTES)
     rgb = img.rgb
@@ -462,8 +462,8 @@ def _check_image(path: Path, role: str, max_pixels: int) -> tuple[dict[str, Any]
 
 def _check_shape(path: Path, suffix: str | None) -> tuple[dict[str, Any], bytes]:
     """Load a base-shape heightfield as the design would: (width/height, grey thumbnail PNG)."""
-    from saucerfab.heightfield import load_shape
-    from saucerfab.imageio import npy_header
+    from saucerfab.files.imageio import npy_header
+    from saucerfab.model.heightfield import load_shape
 
     if suffix not in (".png", ".npy"):
         raise ShapeError(

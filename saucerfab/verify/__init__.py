@@ -8,6 +8,7 @@ the input pictures as the designer meant them (PSNR, SSIM, coverage). See
 for the JSON schema.
 """
 
+from saucerfab.model.eyes import EyeSpec, parse_eyes
 from saucerfab.verify.core import (
     DEFAULT_MIN_COVERAGE,
     DEFAULT_MIN_PSNR_DB,
@@ -16,7 +17,6 @@ from saucerfab.verify.core import (
     stand_sentence,
     verify_print,
 )
-from saucerfab.eyes import EyeSpec, parse_eyes
 from saucerfab.verify.printfolder import VerifyInputError, reference_name
 from saucerfab.verify.results import SCHEMA, FileScore, VerifyResult, ViewScore
 

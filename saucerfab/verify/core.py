@@ -47,11 +47,12 @@ from typing import Any
 import numpy as np
 
 from saucerfab.errors import ConfigError
-from saucerfab.images import recorded_background
-from saucerfab.eyes import EyeSpec, eye_positions, eyes_made_for
+from saucerfab.fabricate.scene_file import PrintScene
+from saucerfab.imaging.images import recorded_background
+from saucerfab.model.design import Intent
+from saucerfab.model.eyes import EyeSpec, eye_positions
 from saucerfab.verify.metrics import best_shift, psnr, ssim
 from saucerfab.verify.printfolder import (
-    PrintScene,
     VerifyInputError,
     design_parameters,
     find_mesh_files,
@@ -139,7 +140,7 @@ def resize_box(img: np.ndarray, size: int) -> np.ndarray:
 
 def picture_box(mask: np.ndarray) -> tuple[slice, slice]:
     """The rows and columns of (S, S) ``mask``'s bounding box: a picture's rectangle
-    (:meth:`~.printfolder.ViewSpec.picture_mask`) as slices, to crop a frame to the picture."""
+    (:meth:`~saucerfab.fabricate.scene_file.ViewSpec.picture_mask`) as slices, to crop a frame to the picture."""
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
     if rows.size == 0:
         return slice(None), slice(None)
@@ -177,7 +178,7 @@ def verify_print(
     Args:
         folder: a folder written by ``saucerfab export``.
         eyes: which eyes (default: those the design was made for, when it was made for more than
-            the design eye (:func:`saucerfab.eyes.eyes_made_for`); else the design eye and a viewer's two eyes).
+            the design eye (:class:`saucerfab.model.design.Intent`); else the design eye and a viewer's two eyes).
         res: render size, pixels per side.
         spp: samples per pixel (the colour pass: two halves, :func:`~.raytrace.colour_halves`).
         min_psnr_db, min_coverage: pass levels per view.
@@ -219,7 +220,7 @@ def verify_print(
         files = files[:1]
     # the eyes the design was made for (an eye box is verified over that box), else the design eye and a viewer's two
     made = design_parameters(folder)  # export.json's record of the design: its eyes and its background
-    spec = eyes or eyes_made_for(made) or EyeSpec()
+    spec = eyes or Intent.of(made).eyes or EyeSpec()
     all_eyes = eye_positions(spec, scene.camera, scene.views["direct"].target)
     jobs = len(all_eyes) * (len(views) + 1) + (len(files) - 1) * len(views)
     done = 0

@@ -38,7 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from saucerfab.verify.printfolder import CupSpec, PrintedSurface, ViewSpec
+from saucerfab.fabricate.scene_file import CupSpec, ViewSpec
+from saucerfab.verify.printfolder import PrintedSurface
 from saucerfab.verify.raytrace import (
     FULL_COVERAGE,
     PositionScene,

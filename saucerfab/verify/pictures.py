@@ -17,7 +17,7 @@ NOT_COMPARED = (0.35, 0.35, 0.35)
 
 def difference_map(render: np.ndarray, ref: np.ndarray, region: np.ndarray) -> np.ndarray:
     """(S, S, 3) float: |render - ref| averaged over RGB, 0..HEAT_MAX on ``magma``; grey outside ``region``."""
-    from saucerfab.colormaps import colormap
+    from saucerfab.imaging.colormaps import colormap
 
     d = np.abs(np.asarray(render, np.float32) - np.asarray(ref, np.float32)).mean(axis=2)
     heat = colormap("magma", d / HEAT_MAX).astype(np.float32) / 255.0
@@ -27,7 +27,7 @@ def difference_map(render: np.ndarray, ref: np.ndarray, region: np.ndarray) -> n
 
 def view_picture(render: np.ndarray, ref: np.ndarray, region: np.ndarray, score: ViewScore) -> np.ndarray:
     """The three panels as one (H, W, 3) uint8 picture, titled with the scores."""
-    from saucerfab.report import side_by_side
+    from saucerfab.imaging.panels import side_by_side
 
     meant = "meant" if score.reference == REFERENCE_PICTURE else "a flat print, from this eye"
     return side_by_side(
@@ -43,15 +43,15 @@ def view_picture(render: np.ndarray, ref: np.ndarray, region: np.ndarray, score:
 def write_view_picture(folder: Path, stem: str, render: np.ndarray, ref: np.ndarray, region: np.ndarray,
                        score: ViewScore) -> Path:
     """Write :func:`view_picture` as ``folder/stem.png`` (atomically); returns the path."""
-    from saucerfab.fileio import write_bytes_atomic
-    from saucerfab.report import to_png_bytes
+    from saucerfab.files.fileio import write_bytes_atomic
+    from saucerfab.imaging.panels import to_png_bytes
 
     return write_bytes_atomic(folder / f"{stem}.png", to_png_bytes(view_picture(render, ref, region, score)))
 
 
 def whole_picture(wv: Any, score: WholeViewScore) -> np.ndarray:
     """The whole view, its ideal and the stray map (:mod:`.wholeview`) as one (H, W, 3) uint8 picture, titled."""
-    from saucerfab.report import side_by_side
+    from saucerfab.imaging.panels import side_by_side
     from saucerfab.verify.wholeview import stray_map
 
     def pct(x: float) -> str:
@@ -69,7 +69,7 @@ def whole_picture(wv: Any, score: WholeViewScore) -> np.ndarray:
 
 def write_whole_picture(folder: Path, stem: str, wv: Any, score: WholeViewScore) -> Path:
     """Write :func:`whole_picture` as ``folder/stem.png`` (atomically); returns the path."""
-    from saucerfab.fileio import write_bytes_atomic
-    from saucerfab.report import to_png_bytes
+    from saucerfab.files.fileio import write_bytes_atomic
+    from saucerfab.imaging.panels import to_png_bytes
 
     return write_bytes_atomic(folder / f"{stem}.png", to_png_bytes(whole_picture(wv, score)))

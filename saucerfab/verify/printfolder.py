@@ -2,7 +2,8 @@
 
 A print folder is what ``saucerfab export`` writes: the mesh files, their
 textures, ``scene.json`` (the viewing geometry in the files' millimetres,
-schema ``saucerfab.scene/1``, see :mod:`saucerfab.fabricate.scene_json`)
+schema ``saucerfab.scene/1``, written by :mod:`saucerfab.fabricate.scene_json`
+and read by :mod:`saucerfab.fabricate.scene_file`)
 and the reference pictures ``reference_<view>.png`` (each input picture as
 the designer meant it: alpha composited over the design's background and
 fitted into its square view frame by the design's rule, in the frame's
@@ -13,27 +14,25 @@ it was sent): ``scene.json`` is size-bounded and every number is checked,
 meshes go through the checker's bounded readers
 (:func:`saucerfab.check.readers.read_mesh`) and pictures through the
 bounded image loader. Any problem raises :class:`VerifyInputError` (exit 2)
-with what is wrong and what to do.
+with what is wrong and what to do (a bad ``scene.json``: the reader's
+:class:`~saucerfab.errors.SceneFileError`, raised again as verify's).
 """
 
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from saucerfab.design import reference_name
-from saucerfab.cups import CUP_CLASSES, Cup, cup_from_dict
-from saucerfab.errors import ConfigError, InputFileError
-from saucerfab.formats import TABLE
-from saucerfab.scene import EXTENT_TOLERANCE, FULL_EXTENT, MAX_GRID
+from saucerfab.errors import InputFileError, SceneFileError
+from saucerfab.fabricate.scene_file import MAX_SCENE_JSON_BYTES, PrintScene, read_scene_file
+from saucerfab.files.formats import TABLE
+from saucerfab.model.design_folder import reference_name
+from saucerfab.model.scene import MAX_GRID
 
-#: largest scene.json read (a real one is about 1.5 kB)
-MAX_SCENE_JSON_BYTES = 1 << 20
 #: largest reference picture read, bytes and pixels
 MAX_REFERENCE_BYTES = 64 << 20
 MAX_REFERENCE_PIXELS = 4096 * 4096
@@ -42,210 +41,31 @@ MAX_REFERENCE_PIXELS = 4096 * 4096
 RENDERED_FORMATS = ("obj", "zip", "3mf", "glb")
 #: suffix of each rendered format's mesh file (from the formats table)
 _SUFFIX = {f: TABLE[f].mesh_suffix if f in TABLE else f".{f}" for f in RENDERED_FORMATS}
-#: view names a print may have, in report order
-VIEW_NAMES = ("direct", "reflected", "reflected2")
 
 
 class VerifyInputError(InputFileError):
     """A print folder (or a file in it) that verify cannot use."""
 
 
-@dataclass(frozen=True)
-class ViewSpec:
-    """One view frame of ``scene.json`` (file frame, mm).
-
-    Attributes:
-        name: ``direct``, ``reflected`` or ``reflected2``.
-        target: (3,) point the view axis passes through, mm.
-        viewing_angle_deg: SoftRas's half field of view: tan(angle) = half
-            the frame's width / depth along the axis.
-        extent: (ex, ey) the picture's half width and half height in the
-            frame's NDC (:mod:`saucerfab.render.camera`): the picture covers
-            the centred rectangle ``|x_ndc| <= ex``, ``|y_ndc| <= ey`` of the
-            square frame, the rest is its background; (1, 1) the whole square.
-    """
-
-    name: str
-    target: tuple[float, float, float]
-    viewing_angle_deg: float
-    extent: tuple[float, float] = FULL_EXTENT
-
-    def picture_mask(self, size: int) -> np.ndarray:
-        """(size, size) bool: the frame's pixels whose centres lie inside the picture's rectangle.
-
-        Pixel (row i, column j) of a ``size`` px frame has its centre at
-        ``x_ndc = (2j + 1) / size - 1``, ``y_ndc = 1 - (2i + 1) / size``; it is
-        inside when ``|x_ndc| <= ex`` and ``|y_ndc| <= ey``. Compared as
-        ``|2k + 1 - size| <= e * size`` (an odd integer against one product), so
-        the rectangle is symmetric and (1, 1) is every pixel, with no rounding.
-        """
-        off = np.abs(2 * np.arange(size, dtype=np.float64) + 1 - size)  # |centre| in half pixels
-        ex, ey = self.extent
-        return (off <= ey * size)[:, None] & (off <= ex * size)[None, :]
-
-
-@dataclass(frozen=True)
-class CupSpec:
-    """The mirror cup of ``scene.json`` (file frame, mm).
-
-    Attributes:
-        center: (x, y) of the cup's axis.
-        bottom_z: z of the cup's bottom (its standing plane).
-        height: mirror wall height.
-        outline: the cup's own shape (:mod:`saucerfab.cups`) built from the
-            file's fields, lengths in mm, about its axis: its wall
-            (:meth:`~saucerfab.cups.Cup.wall`) is what verify ray-traces.
-    """
-
-    center: tuple[float, float]
-    bottom_z: float
-    height: float
-    outline: Cup
-
-    @property
-    def shape(self) -> str:
-        """The shape's name in ``scene.json`` (``circle``, ``ellipse``, ``prism``, ...)."""
-        return self.outline.kind
-
-    @property
-    def width_mm(self) -> float:
-        """The cup's width as export's ``--cup-diameter-mm`` names it."""
-        return self.outline.width_units
-
-
-@dataclass(frozen=True)
-class PrintScene:
-    """``scene.json`` as verify uses it.
-
-    Attributes:
-        camera: (3,) the design eye, mm, file frame.
-        views: view name -> frame, in :data:`VIEW_NAMES` order.
-        cup: the mirror cup.
-        saucer_x, saucer_y: the saucer's footprint (min, max), mm.
-        mm_per_unit: millimetres per model unit.
-        glb_matrix: (4, 4) the GLB node's matrix (file frame in metres -> glTF's y-up).
-    """
-
-    camera: tuple[float, float, float]
-    views: dict[str, ViewSpec]
-    cup: CupSpec
-    saucer_x: tuple[float, float]
-    saucer_y: tuple[float, float]
-    mm_per_unit: float
-    glb_matrix: np.ndarray
-
-
-def _bad(path: Path, what: str) -> VerifyInputError:
-    return VerifyInputError(f"{path}: {what}; re-export the design with 'saucerfab export' to get a valid scene.json")
-
-
-def _num(path: Path, v: Any, what: str, *, positive: bool = False, limit: float = 1e7) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > limit:
-        raise _bad(path, f"{what} must be a finite number (|x| <= {limit:g}), got {str(v)[:40]!r}")
-    if positive and v <= 0:
-        raise _bad(path, f"{what} must be positive, got {v!r}")
-    return float(v)
-
-
-def _vec(path: Path, v: Any, n: int, what: str) -> tuple[float, ...]:
-    if not isinstance(v, list) or len(v) != n:
-        raise _bad(path, f"{what} must be a list of {n} numbers, got {str(v)[:60]!r}")
-    return tuple(_num(path, x, what) for x in v)
-
-
-def _extent(path: Path, v: Any, what: str) -> tuple[float, float]:
-    """A view's ``extent``: two numbers in (0, 1], the larger 1 within :data:`EXTENT_TOLERANCE` (made exactly 1)."""
-    ex, ey = _vec(path, v, 2, what)
-    rule = (f"{what} is the picture's half width and half height in its square frame: two numbers in (0, 1], "
-            f"the larger 1 (a 2:1 picture: [1.0, 0.5])")
-    if not (0.0 < ex <= 1.0 and 0.0 < ey <= 1.0) or max(ex, ey) < 1.0 - EXTENT_TOLERANCE:
-        raise _bad(path, f"{rule}; got {[ex, ey]}")
-    # a side at 1 is the frame's own edge: exactly 1, so that a writer's rounding loses no edge pixel
-    return (1.0 if ex >= 1.0 - EXTENT_TOLERANCE else ex, 1.0 if ey >= 1.0 - EXTENT_TOLERANCE else ey)
-
-
-def _obj(path: Path, d: Any, key: str) -> dict[str, Any]:
-    v = d.get(key) if isinstance(d, dict) else None
-    if not isinstance(v, dict):
-        raise _bad(path, f"'{key}' is missing or not an object")
-    return v
-
-
 def load_print_scene(folder: Path) -> PrintScene:
-    """Read and validate ``folder/scene.json``.
+    """Read and validate ``folder/scene.json`` (:func:`saucerfab.fabricate.scene_file.read_scene_file`).
+
+    The scene's footprint (``saucer_x``, ``saucer_y``) is always set: a
+    print's scene.json must have it.
 
     Raises:
         VerifyInputError: missing, too large, not JSON, wrong schema, or a
-            value out of range.
+            value out of range (the reader's message, as verify's error: exit 2).
     """
     path = folder / "scene.json"
     if not path.is_file():
         raise VerifyInputError(
             f"{folder} is not a print folder: it has no scene.json; give the folder 'saucerfab export --out' wrote"
         )
-    if path.stat().st_size > MAX_SCENE_JSON_BYTES:
-        raise _bad(path, f"the file is over {MAX_SCENE_JSON_BYTES:,} bytes, far more than any scene")
     try:
-        d = json.loads(path.read_bytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
-        raise _bad(path, f"not valid JSON ({str(exc)[:80]})") from None
-    if not isinstance(d, dict) or d.get("schema") != "saucerfab.scene/1":
-        got = d.get("schema") if isinstance(d, dict) else None
-        raise _bad(path, f"schema is {str(got)[:40]!r}, expected 'saucerfab.scene/1'")
-    if d.get("units") != "mm":
-        raise _bad(path, f"units are {str(d.get('units'))[:20]!r}; verify reads scenes in 'mm'")
-    camera = _vec(path, _obj(path, d, "camera").get("position"), 3, "camera.position")
-    views_d = _obj(path, d, "views")
-    views: dict[str, ViewSpec] = {}
-    for name in VIEW_NAMES:
-        if name not in views_d:
-            continue
-        v = views_d[name]
-        if not isinstance(v, dict):
-            raise _bad(path, f"views.{name} is not an object")
-        target = _vec(path, v.get("target"), 3, f"views.{name}.target")
-        angle = _num(path, v.get("viewing_angle_deg"), f"views.{name}.viewing_angle_deg", positive=True)
-        if angle >= 89:
-            raise _bad(path, f"views.{name}.viewing_angle_deg {angle} is not below 89 degrees")
-        if math.dist(target, camera) < 1e-6:
-            raise _bad(path, f"views.{name}.target is the camera position")
-        fwd = np.subtract(target, camera)
-        if np.linalg.norm(np.cross(fwd / np.linalg.norm(fwd), (0.0, 0.0, 1.0))) < 1e-9:
-            raise _bad(path, f"views.{name} looks straight up or down; its image orientation is undefined")
-        extent = _extent(path, v["extent"], f"views.{name}.extent") if "extent" in v else FULL_EXTENT
-        views[name] = ViewSpec(name, target, angle, extent)  # type: ignore[arg-type]
-    for name in ("direct", "reflected"):
-        if name not in views:
-            raise _bad(path, f"views.{name} is missing")
-    c = _obj(path, d, "cup")
-    shape = c.get("shape")
-    if shape not in CUP_CLASSES:
-        raise _bad(path, f"cup.shape is {str(shape)[:20]!r}; known: {', '.join(CUP_CLASSES)}")
-    center = _vec(path, c.get("center"), 2, "cup.center")
-    bottom_z = _num(path, c.get("bottom_z"), "cup.bottom_z")
-    height = _num(path, c.get("height"), "cup.height", positive=True)
-    shape_fields = {k: v for k, v in c.items() if k not in ("center", "bottom_z")}
-    for key, value in shape_fields.items():  # every length and angle a bounded number (sides too)
-        if key != "shape":
-            for x in value if isinstance(value, list) else [value]:
-                _num(path, x, f"cup.{key}")
-    try:
-        outline = cup_from_dict(shape_fields, shape)  # the shape's own checks, as for a scene file
-    except (ConfigError, TypeError, ValueError) as exc:
-        raise _bad(path, f"cup: {str(exc)[:200]}") from None
-    cup = CupSpec(center, bottom_z, height, outline)  # type: ignore[arg-type]
-    saucer = _obj(path, d, "saucer")
-    sx = _vec(path, saucer.get("x_range"), 2, "saucer.x_range")
-    sy = _vec(path, saucer.get("y_range"), 2, "saucer.y_range")
-    if not (sx[0] < sx[1] and sy[0] < sy[1]):
-        raise _bad(path, "saucer.x_range and y_range must be (min, max) with min < max")
-    mpu = _num(path, d.get("mm_per_unit"), "mm_per_unit", positive=True)
-    glb = d.get("glb") if isinstance(d.get("glb"), dict) else {}
-    mat = glb.get("node_matrix_column_major", [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0])
-    m = np.array(_vec(path, mat, 16, "glb.node_matrix_column_major"), np.float64).reshape(4, 4).T
-    if abs(np.linalg.det(m[:3, :3])) < 1e-9:
-        raise _bad(path, "glb.node_matrix_column_major is singular")
-    return PrintScene(camera, views, cup, sx, sy, mpu, m)  # type: ignore[arg-type]
+        return read_scene_file(path)
+    except SceneFileError as exc:
+        raise VerifyInputError(str(exc)) from None
 
 
 # --------------------------------------------------------------------------- meshes
@@ -434,7 +254,7 @@ def load_references(folder: Path, views: list[str]) -> dict[str, np.ndarray]:
             verify existed), unreadable or not square.
     """
     from saucerfab.errors import ImageError
-    from saucerfab.images import load_image
+    from saucerfab.imaging.images import load_image
 
     out: dict[str, np.ndarray] = {}
     for view in views:

@@ -60,7 +60,8 @@ from typing import Any
 import numpy as np
 
 from saucerfab.errors import SaucerfabError
-from saucerfab.verify.printfolder import CupSpec, PrintedSurface, ViewSpec
+from saucerfab.fabricate.scene_file import CupSpec, ViewSpec
+from saucerfab.verify.printfolder import PrintedSurface
 
 #: pixels seen at least this fully are compared (a pixel's share where the top is seen)
 FULL_COVERAGE = 0.999
@@ -223,7 +224,7 @@ def cup_mesh(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The cup's mirror wall as triangles with outward shading normals.
 
-    Each straight piece of the wall (:meth:`saucerfab.cups.Cup.wall`) is cut
+    Each straight piece of the wall (:meth:`saucerfab.model.cups.Cup.wall`) is cut
     into three quads of its own at ``|z| = max(|x|, |y|)`` (render frame), so
     a facet keeps its flat normal, a smooth cup's normals, equal at the
     shared edges, shade smoothly, and the inset below is linear over every
@@ -351,7 +352,7 @@ class PrintTracer:
     def render(self, eye: tuple[float, float, float], view: ViewSpec, size: int, spp: int, *, seed: int = 0) -> ViewRender:
         """Both passes of ``view`` seen from ``eye`` (mm), ``size`` x ``size`` pixels.
 
-        The camera follows :mod:`saucerfab.render.camera`: a look-at from the
+        The camera follows :mod:`saucerfab.model.camera`: a look-at from the
         eye to the view's target with z up, square frame, half angle
         ``view.viewing_angle_deg``; row 0 at the top, +x of the view to the right.
         The colour pass is two renders of :func:`colour_halves` samples per
@@ -381,7 +382,7 @@ class PrintTracer:
 
 def _sensor(mi: Any, eye: tuple[float, float, float], view: ViewSpec, size: int, spp: int, extent_mm: float,
             origin: np.ndarray, sampler: str = COVERAGE_SAMPLER) -> Any:
-    """The camera of :mod:`saucerfab.render.camera` in the render frame (``origin`` at 0): a look-at
+    """The camera of :mod:`saucerfab.model.camera` in the render frame (``origin`` at 0): a look-at
     from ``eye`` to the view's target, z up, square."""
     dist = math.dist(eye, view.target)
     return mi.load_dict(

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from saucerfab import __version__
-from saucerfab.eyes import Eye
+from saucerfab.model.eyes import Eye
 
 SCHEMA = "saucerfab.verify/3"
 

@@ -30,7 +30,7 @@ sub-samples of:
 
 The background colour is the design's ``--background`` when ``export.json``
 records one, else the picture's own border colour
-(:func:`saucerfab.images.estimate_background`: the median of its outer ring).
+(:func:`saucerfab.imaging.images.estimate_background`: the median of its outer ring).
 Pixels that see no part (the table, the cup's rim, the mirror showing
 anything else) or see it partly, or partly directly and partly in the mirror,
 are left out of every score, and so is the outline of what sees it (a pixel
@@ -62,7 +62,8 @@ from typing import Any
 
 import numpy as np
 
-from saucerfab.verify.printfolder import CupSpec, PrintedSurface, PrintScene, ViewSpec
+from saucerfab.fabricate.scene_file import CupSpec, PrintScene, ViewSpec
+from saucerfab.verify.printfolder import PrintedSurface
 from saucerfab.verify.raytrace import (
     FULL_COVERAGE,
     PositionScene,
@@ -169,7 +170,7 @@ def background_colours(references: dict[str, np.ndarray], background: Any = None
         references: view -> (H, W, 3) float reference picture in [0, 1].
         background: the design's ``background`` parameter (``#rrggbb``) or None.
     """
-    from saucerfab.images import intended_background
+    from saucerfab.imaging.images import intended_background
 
     return {v: intended_background(img, background) for v, img in references.items()}
 

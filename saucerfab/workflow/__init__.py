@@ -5,6 +5,8 @@ the studio are thin doors over these functions; none of them calls a stage
 (``export_design``, ``check_mesh``, ``verify_print``) itself
 (``tests/test_workflow.py`` holds them to it).
 
+- :func:`run_design`: a design request -> a design folder with its page, the typed
+  :class:`~saucerfab.model.design.Design` returned (:mod:`.designing`);
 - :func:`make_print`: a design folder -> a print folder: export, check every
   file, quick verify, ``report.html`` (:mod:`.printing`);
 - :func:`finish_print`: the same after an export that exists;
@@ -19,6 +21,7 @@ The workflow may import the stage packages (``fabricate``, ``check``,
 from __future__ import annotations
 
 from saucerfab.workflow.checks import CheckedFile, MeshToCheck, check_export, export_limits, meshes_to_check
+from saucerfab.workflow.designing import design_pages, run_design
 from saucerfab.workflow.printing import STAGES, PrintResult, finish_print, make_print
 from saucerfab.workflow.quick_verify import QUICK_RES, QUICK_SPP, QUICK_TEXTURE_PX, quick_verify, verify_design
 
@@ -31,10 +34,12 @@ __all__ = [
     "MeshToCheck",
     "PrintResult",
     "check_export",
+    "design_pages",
     "export_limits",
     "finish_print",
     "make_print",
     "meshes_to_check",
     "quick_verify",
+    "run_design",
     "verify_design",
 ]

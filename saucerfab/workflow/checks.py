@@ -58,7 +58,7 @@ class CheckedFile:
 def meshes_to_check(files: Mapping[str, Sequence[Path]], scratch: Path | None = None) -> Iterator[list[MeshToCheck]]:
     """The mesh files of an export (format -> its written files), unpacked where zipped; for the ``with`` block.
 
-    Which files hold a mesh is :func:`saucerfab.formats.files_to_check`'s
+    Which files hold a mesh is :func:`saucerfab.files.formats.files_to_check`'s
     answer. A zipped OBJ (``FabOptions.obj_zip``) is checked as what the
     bureau unpacks: the archive's entries go to a temporary folder (under
     ``scratch`` when given), removed when the block ends, and its mesh entry
@@ -69,7 +69,7 @@ def meshes_to_check(files: Mapping[str, Sequence[Path]], scratch: Path | None = 
             that is not a plain file name (the export wrote it: an internal error).
     """
     from saucerfab.errors import ExportError
-    from saucerfab.formats import TABLE, files_to_check
+    from saucerfab.files.formats import TABLE, files_to_check
 
     with tempfile.TemporaryDirectory(prefix="saucerfab-check-", dir=scratch) as tmp:
         out: list[MeshToCheck] = []

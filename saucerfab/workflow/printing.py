@@ -10,7 +10,7 @@ its part after the export:
 2. ``verify``: a quick ray trace of the first textured file from the design
    eye and a viewer's two eyes (:mod:`saucerfab.workflow.quick_verify`),
    pictures and ``verify.json`` in ``verify/``;
-3. ``report.html`` (:mod:`saucerfab.report_page`).
+3. ``report.html`` (:mod:`saucerfab.pages.folder_pages`).
 
 Each file is written atomically; a failure of step 2 or 3 never removes the
 print files, and is reported as a note rather than raised, because the
@@ -22,10 +22,13 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from saucerfab.workflow.checks import CheckedFile, check_export, check_json
 from saucerfab.workflow.quick_verify import Progress, quick_verify
+
+if TYPE_CHECKING:
+    from saucerfab.model.design import Design
 
 #: the stages of :func:`make_print`, in order (``on_stage`` is told each as it starts)
 STAGES = ("export", "check", "verify", "report")
@@ -87,7 +90,7 @@ def finish_print(
         on_stage: told each stage of :data:`STAGES` after the export as it starts.
     """
     from saucerfab.errors import SaucerfabError
-    from saucerfab.fileio import write_text_atomic
+    from saucerfab.files.fileio import write_text_atomic
 
     folder = Path(result.out)
     done = PrintResult(export=result)
@@ -104,7 +107,7 @@ def finish_print(
             done.notes.append(f"not verified: {exc}")
     _tell(on_stage, "report")
     try:
-        from saucerfab.report_page import refresh_export_report
+        from saucerfab.pages.folder_pages import refresh_export_report
 
         refresh_export_report(folder)
     except (SaucerfabError, OSError, ValueError) as exc:  # the print files are complete; say why the page is missing
@@ -113,7 +116,7 @@ def finish_print(
 
 
 def make_print(
-    design_dir: str | Path,
+    design: Design | str | Path,
     out: str | Path,
     *,
     printer: Any = None,
@@ -130,10 +133,11 @@ def make_print(
     scratch: Path | None = None,
     on_stage: OnStage | None = None,
 ) -> PrintResult:
-    """Export a design folder to ``out`` for a printer, then :func:`finish_print` it: the whole sequence.
+    """Export a design to ``out`` for a printer, then :func:`finish_print` it: the whole sequence.
 
     Args:
-        design_dir: the design folder (``saucerfab design``'s, or ``run_design``'s).
+        design: the design (:func:`~saucerfab.workflow.run_design`'s) or its folder; what it was
+            made for (:attr:`~saucerfab.model.design.Design.intent`) is the default of each option left None.
         out: the print folder to write (replaced whole).
         printer, cup_diameter_mm, formats, options, allow_other_formats: as
             :func:`~saucerfab.fabricate.pipeline.export_design` takes them (None: the design's printer and
@@ -149,7 +153,7 @@ def make_print(
     import saucerfab.fabricate.pipeline as pipeline
 
     _tell(on_stage, "export")
-    result = pipeline.export_design(design_dir, out, printer=printer, cup_diameter_mm=cup_diameter_mm,
+    result = pipeline.export_design(design, out, printer=printer, cup_diameter_mm=cup_diameter_mm,
                                     formats=list(formats) if formats is not None else None, options=options,
                                     progress=progress, allow_other_formats=allow_other_formats)
     return finish_print(result, result.profile, check=check, verify=verify, record_times=record_times,

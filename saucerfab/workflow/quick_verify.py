@@ -13,9 +13,12 @@ import json
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from saucerfab.profiles import DEFAULT_PRINTER
+from saucerfab.model.profiles import DEFAULT_PRINTER
+
+if TYPE_CHECKING:
+    from saucerfab.model.design import Design
 
 #: quick verify of every export: render size (pixels) and samples per pixel
 QUICK_RES = 128
@@ -51,7 +54,7 @@ def quick_verify(
     Raises:
         SaucerfabError: the print cannot be verified.
     """
-    from saucerfab.fileio import atomic_dir
+    from saucerfab.files.fileio import atomic_dir
     from saucerfab.verify import verify_print
 
     with atomic_dir(verify_dir) as tmp:
@@ -64,14 +67,19 @@ def quick_verify(
 
 
 def verify_design(
-    design_dir: str | Path,
+    design: Design | str | Path,
     *,
-    printer: str = DEFAULT_PRINTER,
+    printer: str | None = None,
     cup_diameter_mm: float | None = None,
     record_times: bool = True,
     progress: Progress | None = None,
 ) -> Any:
-    """Quick-verify a design folder through a trial export; results in ``design_dir/verify/``.
+    """Quick-verify a design through a trial export; results in its folder's ``verify/``.
+
+    ``design`` is a :class:`~saucerfab.model.design.Design` with its folder (what
+    :func:`~saucerfab.workflow.run_design` returns) or a design folder; ``printer`` None is the
+    printer it was made for (its :attr:`~saucerfab.model.design.Design.intent`), else
+    :data:`~saucerfab.model.profiles.DEFAULT_PRINTER`.
 
     The design is exported (OBJ, or the first format verify renders that ``printer`` takes, with a
     :data:`QUICK_TEXTURE_PX` atlas) to a temporary folder, that print is verified as an export's is
@@ -86,20 +94,27 @@ def verify_design(
     import saucerfab.fabricate.pipeline as pipeline
     from saucerfab.errors import ExportError
     from saucerfab.fabricate.options import FabOptions
-    from saucerfab.formats import WRITERS
-    from saucerfab.profiles import load_profile
-    from saucerfab.report_page import write_design_report
+    from saucerfab.files.formats import WRITERS
+    from saucerfab.model.design import Design
+    from saucerfab.model.design_folder import load_design
+    from saucerfab.model.profiles import load_profile
+    from saucerfab.pages.folder_pages import write_design_report
     from saucerfab.verify.printfolder import RENDERED_FORMATS
 
-    design_dir = Path(design_dir)
-    profile = load_profile(printer)
+    if not isinstance(design, Design):
+        design = load_design(design)
+    if design.folder is None:
+        raise ExportError("verify_design needs a design with its folder (the verify is written into it); "
+                          "save the design first (saucerfab.model.design_folder.save_design)")
+    design_dir = design.folder
+    profile = load_profile(printer or design.intent.printer or DEFAULT_PRINTER)
     # the trial print in a format verify renders and the printer takes (OBJ first: the quickest to read)
     rendered = [f for f in RENDERED_FORMATS if f in WRITERS]  # ("zip" is how verify reads a zipped OBJ)
     fmt = next((f for f in rendered if f in profile.accepted_formats), None)
     if fmt is None:
         raise ExportError(f"{profile.name} takes none of {', '.join(rendered)}, the formats verify renders")
     with tempfile.TemporaryDirectory(prefix="saucerfab-trial-") as tmp:
-        trial = pipeline.export_design(design_dir, Path(tmp) / "print", printer=profile,
+        trial = pipeline.export_design(design, Path(tmp) / "print", printer=profile,
                                        cup_diameter_mm=cup_diameter_mm, formats=[fmt],
                                        options=FabOptions(texture_px=QUICK_TEXTURE_PX))
         res = quick_verify(trial.out, design_dir / "verify", record_times=record_times, progress=progress,

@@ -25,8 +25,8 @@ from saucerfab.batch.jobs import MARKER, completed, read_marker
 from saucerfab.batch.report import HTML_NAME, JSON_NAME, LineDisplay
 from saucerfab.batch.runner import LOCK_NAME, _locked
 from saucerfab.cli import main
-from saucerfab.design import save_design, synthetic_design
 from saucerfab.errors import ConfigError
+from saucerfab.model.design_folder import save_design, synthetic_design
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "samples" / "batch"

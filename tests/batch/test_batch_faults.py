@@ -95,7 +95,7 @@ def test_ids_that_only_start_like_a_device_are_fine(tmp_path: Path) -> None:
 
 
 def test_a_printer_profile_nested_too_deeply_is_a_config_error(tmp_path: Path) -> None:
-    from saucerfab.profiles import load_profile
+    from saucerfab.model.profiles import load_profile
 
     p = tmp_path / "deep.toml"
     p.write_text('name = "x"\nnotes = ' + "[" * 5000 + "]" * 5000 + "\n")

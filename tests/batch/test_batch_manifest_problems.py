@@ -23,8 +23,8 @@ from saucerfab.batch.manifest import load_manifest
 from saucerfab.batch.manifest_lines import MAX_PROBLEMS_SHOWN
 from saucerfab.cli import main
 from saucerfab.errors import ConfigError
+from saucerfab.model.profiles import DEFAULT_PRINTER
 from saucerfab.optimize.request import DesignRequest
-from saucerfab.profiles import DEFAULT_PRINTER
 
 # line numbers below count from the first line of these texts (no leading newline)
 TOML = """\

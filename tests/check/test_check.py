@@ -9,13 +9,13 @@ import subprocess
 import zipfile
 from pathlib import Path
 
+import fixtures_check as fx
 import numpy as np
 import pytest
 
-import fixtures_check as fx
 from saucerfab.check import Limits, Report, check_mesh
 from saucerfab.errors import ConfigError
-from saucerfab.profiles import load_profile
+from saucerfab.model.profiles import load_profile
 
 
 def codes(r: Report, severity: str | None = None) -> set[str]:

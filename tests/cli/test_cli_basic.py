@@ -10,8 +10,9 @@ import pytest
 
 import saucerfab
 from saucerfab.cli import SUBCOMMANDS, main
-from saucerfab.heightfield import base_shape, load_shape
-from saucerfab.scene import PrismCup, Scene, load_scene, paper_scene, scene_to_toml
+from saucerfab.model.cups import PrismCup
+from saucerfab.model.heightfield import base_shape, load_shape
+from saucerfab.model.scene import Scene, load_scene, paper_scene, scene_to_toml
 
 
 def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:

@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 
 from saucerfab.cli import SUBCOMMANDS, build_parser, main
-from saucerfab.design import save_design, synthetic_design
+from saucerfab.model.design_folder import save_design, synthetic_design
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 #: export options that keep a test export small and fast
@@ -167,7 +167,7 @@ def test_check_out_writes_the_json_and_refuses_to_replace_without_force(
 
 
 def test_design_and_verify_name_the_eyes_with_the_same_words() -> None:
-    from saucerfab.eyes import EYES_USAGE, parse_eyes
+    from saucerfab.model.eyes import EYES_USAGE, parse_eyes
     from saucerfab.optimize.request import DesignRequest
 
     for word in ("design", "both", "box:40,20"):
@@ -300,9 +300,12 @@ def test_the_trial_verify_exports_a_format_the_printer_takes(tmp_path: Path, mon
     (profiles / "no_obj.toml").write_text(text.replace('accepted_formats = ["3mf", "obj", "wrl", "ply", "stl", "glb"]',
                                                        'accepted_formats = ["3mf", "wrl"]'))
     monkeypatch.setenv("SAUCERFAB_PRINTERS", str(profiles))
+    from saucerfab.model.design_folder import save_design, synthetic_design
+
+    design = save_design(synthetic_design(resolution=12, texture_size=32), tmp_path / "design")
     for printer, fmt in (("j55", "obj"), ("no_obj", "3mf")):
         with pytest.raises(ExportError, match="stopped by the test"):
-            verify_design(tmp_path, printer=printer)
+            verify_design(design, printer=printer)
         assert asked.pop() == [fmt]
 
 
@@ -349,7 +352,11 @@ def test_a_design_json_whose_parameters_are_not_an_object_is_a_clear_error(
 
 def test_verify_renders_from_the_eyes_the_design_was_made_for(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import saucerfab.verify.core as core
-    from saucerfab.eyes import eyes_made_for, parse_eyes
+    from saucerfab.model.design import Intent
+    from saucerfab.model.eyes import parse_eyes
+
+    def eyes_made_for(parameters):  # noqa: ANN001, ANN202
+        return Intent.of(parameters).eyes
     from saucerfab.verify.printfolder import design_parameters
 
     assert eyes_made_for({"eyes": "box:40,20,2"}) == parse_eyes("box:40,20,2")

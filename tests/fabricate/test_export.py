@@ -33,12 +33,13 @@ import pytest
 from PIL import Image
 
 from saucerfab.cli import main
-from saucerfab.design import Design, FaceView, save_design, synthetic_design
 from saucerfab.errors import ConfigError, DesignError, ExportError, MeshError
 from saucerfab.fabricate.options import NEUTRAL_WALL_RGB, FabOptions
 from saucerfab.fabricate.pipeline import ExportResult, export_design
-from saucerfab.formats import FORMATS
-from saucerfab.profiles import PrinterProfile, load_profile
+from saucerfab.files.formats import FORMATS
+from saucerfab.model.design import Design, FaceView
+from saucerfab.model.design_folder import save_design, synthetic_design
+from saucerfab.model.profiles import PrinterProfile, load_profile
 
 ROOT = Path(__file__).resolve().parents[2]
 GLTF_VALIDATOR = ROOT / "tools" / "node" / "node_modules" / "gltf-validator"
@@ -602,7 +603,7 @@ def test_thin_features_are_blunted_or_refused_per_profile(tmp_path: Path) -> Non
     opts = FabOptions(texture_px=ATLAS, seat="none", base_thickness_mm=1.0, min_thickness_mm=1.0)
     warn = replace(ALL_FORMATS, min_wall_mm=0.5)
     res = export_design(d, tmp_path / "w", printer=warn, cup_diameter_mm=4.0, formats=["stl"], options=opts)
-    # the export blunts them with the optimizer's rule (saucerfab.relief) and says so
+    # the export blunts them with the optimizer's rule (saucerfab.model.relief) and says so
     assert any("no crest is narrower than" in w and "design with --printer" in w for w in res.warnings)
     assert json.loads(res.summary_json.read_text())["warnings"] == res.warnings
     refuse = replace(warn, thin_policy="refuse")
@@ -774,7 +775,7 @@ def test_walls_and_seat_take_the_background_meant_around_the_direct_picture(desi
 
 def test_a_damaged_recorded_background_falls_back_alike_in_export_and_verify(design: Design) -> None:
     from saucerfab.fabricate.pipeline import surround_rgb
-    from saucerfab.images import recorded_background
+    from saucerfab.imaging.images import recorded_background
     from saucerfab.verify.wholeview import background_colours
 
     cream = np.zeros((32, 32, 3), np.uint8)

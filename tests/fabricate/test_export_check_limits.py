@@ -17,9 +17,9 @@ import pytest
 import saucerfab.check as chk
 import saucerfab.check.limits as limits_mod
 from saucerfab.check import Limits, check_mesh
-from saucerfab.design import save_design, synthetic_design
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.pipeline import ExportResult, export_design
+from saucerfab.model.design_folder import save_design, synthetic_design
 from saucerfab.workflow import export_limits, finish_print
 
 

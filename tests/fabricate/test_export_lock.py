@@ -18,8 +18,8 @@ from pathlib import Path
 import pytest
 
 from saucerfab.cli import main
-from saucerfab.design import save_design, synthetic_design
 from saucerfab.errors import ConfigError
+from saucerfab.model.design_folder import save_design, synthetic_design
 
 #: a second process that holds an export folder's lock until killed
 HOLD_THE_LOCK = """
@@ -112,7 +112,7 @@ def test_a_bad_export_leaves_no_folder_behind(design_dir: Path, tmp_path: Path) 
 
 
 def test_exclusive_lock_is_one_holder_and_removable(tmp_path: Path) -> None:
-    from saucerfab.fileio import exclusive_lock
+    from saucerfab.files.fileio import exclusive_lock
 
     lock = tmp_path / ".x.lock"
 

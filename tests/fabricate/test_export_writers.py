@@ -190,7 +190,7 @@ def test_write_folder(tmp_path: Path) -> None:
 
 
 def test_every_writer_is_registered(tet: TexturedMesh) -> None:
-    from saucerfab.formats import FORMATS
+    from saucerfab.files.formats import FORMATS
 
     assert set(registry.WRITERS) == set(FORMATS)
     for fmt in FORMATS:
@@ -207,10 +207,11 @@ def test_every_writer_is_registered(tet: TexturedMesh) -> None:
     ],
 )
 def test_scene_json_cup_fields_per_shape(cup: str, keys: set[str]) -> None:
-    from saucerfab.design import synthetic_design
     from saucerfab.fabricate.scene_json import scene_dict
     from saucerfab.fabricate.solid import build_solid
-    from saucerfab.scene import CircleCup, EllipseCup, PrismCup, Scene
+    from saucerfab.model.cups import CircleCup, EllipseCup, PrismCup
+    from saucerfab.model.design_folder import synthetic_design
+    from saucerfab.model.scene import Scene
 
     shapes = {"circle": CircleCup(), "ellipse": EllipseCup((0.45, 0.35), 20.0), "prism": PrismCup(6, 0.45, 10.0)}
     scene = Scene(cup=shapes[cup], cup_diameter_mm=90.0)

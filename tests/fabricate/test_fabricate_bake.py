@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from saucerfab.design import Design, FaceView, synthetic_design
 from saucerfab.fabricate.atlas import build_uvmap, layout_page, surface_density, top_uv
 from saucerfab.fabricate.bake import (
     bake_page,
@@ -26,6 +25,8 @@ from saucerfab.fabricate.bake import (
 )
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.solid import build_solid
+from saucerfab.model.design import Design, FaceView
+from saucerfab.model.design_folder import synthetic_design
 
 
 def random_design(n: int = 6, tex: int = 16, seed: int = 0) -> Design:

@@ -8,10 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from saucerfab.design import Design, synthetic_design
 from saucerfab.errors import MeshError
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.profiles import load_profile
 from saucerfab.fabricate.solid import (
     OUTLINE_EPS_MM,
     Solid,
@@ -23,8 +21,12 @@ from saucerfab.fabricate.solid import (
     footprint_on_clipper_grid,
     snap_to_footprint,
 )
-from saucerfab.heightfield import make_grid, triangulate
-from saucerfab.scene import CircleCup, EllipseCup, PrismCup, Saucer, Scene
+from saucerfab.model.cups import CircleCup, EllipseCup, PrismCup
+from saucerfab.model.design import Design
+from saucerfab.model.design_folder import synthetic_design
+from saucerfab.model.heightfield import make_grid, triangulate
+from saucerfab.model.profiles import load_profile
+from saucerfab.model.scene import Saucer, Scene
 
 
 def flat_design(n: int = 12, scene: Scene | None = None) -> Design:

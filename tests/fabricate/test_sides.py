@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from saucerfab.design import synthetic_design
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.pipeline import export_design
 from saucerfab.fabricate.sides import hidden_by_cup, shown_by_cup, surround_sizes, view_areas
-from saucerfab.scene import Scene
+from saucerfab.model.design_folder import synthetic_design
+from saucerfab.model.scene import Scene
 
 UP = np.array([0.0, 0.0, 1.0])
 
@@ -53,7 +53,7 @@ def test_a_point_seen_both_ways_goes_to_the_surround_it_weighs_more_in() -> None
     assert shown_by_cup(scene, p, UP[None], balance=ratio * 0.9)[0]
     assert not shown_by_cup(scene, p, UP[None], balance=ratio * 1.1)[0]
     # a design's scene (frames fitted to the saucer): the mirror's surround is the smaller
-    from saucerfab.heightfield import base_shape
+    from saucerfab.model.heightfield import base_shape
     from saucerfab.optimize.framing import fit_frames
 
     fitted = fit_frames(replace(scene, saucer=replace(scene.saucer, resolution=24)), base_shape("waves", 24),
@@ -121,7 +121,7 @@ def test_a_bad_mirror_colour_is_refused(bad) -> None:  # noqa: ANN001
 
 
 def test_the_surrounds_leave_out_the_pictures_rectangles_not_their_squares() -> None:
-    from saucerfab.heightfield import base_shape
+    from saucerfab.model.heightfield import base_shape
     from saucerfab.optimize.framing import fit_frames
 
     scene = replace(Scene(), saucer=replace(Scene().saucer, resolution=24))

@@ -15,8 +15,8 @@ import pytest
 from PIL import Image
 
 from saucerfab.cli import main
-from saucerfab.design import FaceView
-from saucerfab.heightfield import BASE_SHAPES
+from saucerfab.model.design import FaceView
+from saucerfab.model.heightfield import BASE_SHAPES
 from saucerfab.optimize.diagnose import (
     ACROSS_VIEW_SHAPES,
     BASE_CONFLICT_LIMIT,
@@ -25,10 +25,10 @@ from saucerfab.optimize.diagnose import (
     check_base_shape,
     conflict_share,
 )
-from saucerfab.optimize.pipeline import run_design
 from saucerfab.optimize.prepare import prepare
 from saucerfab.optimize.request import DesignRequest
 from saucerfab.optimize.views import ViewMeshes
+from saucerfab.workflow import run_design
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 PAIR = (SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png")
@@ -112,7 +112,7 @@ def test_the_limits_and_the_candidates_are_what_the_docstring_measured() -> None
 
 def test_the_hint_reaches_design_json_through_run_design(tmp_path, capsys) -> None:
     out = run_design(DesignRequest(*PAIR, shape=str(egg_crate_png(tmp_path)), **SMALL), tmp_path / "egg",
-                     progress=lambda *a: None)
+                     progress=lambda *a: None).folder
     entry = json.loads((out / "design.json").read_text())["metrics"]["base_shape"]
     assert entry["verdict"] == "cause" and entry["shape"] == "eggcrate.png"
     assert entry["conflict_base"] > BASE_CONFLICT_LIMIT and entry["conflict_final"] > FINAL_CONFLICT_LIMIT

@@ -11,9 +11,16 @@ import numpy as np
 import pytest
 
 from saucerfab.errors import ConfigError
-from saucerfab.heightfield import base_shape
+from saucerfab.model.heightfield import base_shape
+from saucerfab.model.scene import (
+    ViewFrame,
+    load_scene,
+    paper_scene,
+    scene_from_dict,
+    scene_to_dict,
+    scene_to_toml,
+)
 from saucerfab.optimize.framing import fit_frames, frame_area, frame_notes, largest_inscribed_rectangle
-from saucerfab.scene import Scene, ViewFrame, load_scene, paper_scene, scene_from_dict, scene_to_dict, scene_to_toml
 
 
 def test_the_largest_rectangle_of_an_aspect_in_a_wide_region() -> None:
@@ -37,7 +44,7 @@ def scene_and_base():
 
 
 def test_a_wide_picture_gets_a_wide_frame_lying_on_the_saucer(scene_and_base) -> None:  # noqa: ANN001
-    from saucerfab.render.camera import Camera
+    from saucerfab.model.camera import Camera
 
     scene, base = scene_and_base
     square = fit_frames(scene, base, "inscribed")
@@ -93,16 +100,16 @@ def test_a_2_to_1_picture_keeps_its_aspect_through_design_and_export(tmp_path: P
 
     from saucerfab.fabricate.options import FabOptions
     from saucerfab.fabricate.pipeline import export_design
-    from saucerfab.optimize.pipeline import run_design
     from saucerfab.optimize.request import DesignRequest
     from saucerfab.samples import SAMPLES
+    from saucerfab.workflow import run_design
 
     wide = np.full((40, 80, 3), 255, np.uint8)
     wide[10:30, 10:70] = (200, 30, 40)  # a red bar on white, 2:1
     Image.fromarray(wide).save(tmp_path / "wide.png")
     req = DesignRequest(direct=SAMPLES / "direct_heart.png", reflected=tmp_path / "wide.png", resolution=32,
                         image_size=64, max_iters=3, record_times=False)
-    folder = run_design(req, tmp_path / "d", progress=lambda *a: None)
+    folder = run_design(req, tmp_path / "d", progress=lambda *a: None).folder
     meta = json.loads((folder / "design.json").read_text())
     assert meta["scene"]["reflected"]["extent"] == [1.0, 0.5]
     assert meta["scene"]["direct"]["extent"] == [1.0, 1.0]

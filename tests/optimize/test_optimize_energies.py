@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from saucerfab.heightfield import laplacian
+from saucerfab.model.heightfield import laplacian
 from saucerfab.optimize.energies import DeformEnergy, e_barrier, e_sparse, e_visual, feasible, prox_l1
 from saucerfab.optimize.solver import ProxSettings, SolverSettings, solve
 

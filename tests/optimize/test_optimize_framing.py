@@ -8,9 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from saucerfab.heightfield import base_shape
+from saucerfab.model.heightfield import base_shape
+from saucerfab.model.scene import paper_scene
 from saucerfab.optimize.framing import fit_frames, largest_inscribed_square
-from saucerfab.scene import paper_scene
 
 
 def test_largest_inscribed_square_of_a_disk_and_of_a_triangle():
@@ -29,7 +29,7 @@ def test_largest_inscribed_square_of_a_disk_and_of_a_triangle():
 
 
 def test_inscribed_frames_lie_on_the_saucer_and_keep_the_camera():
-    from saucerfab.render.camera import Camera
+    from saucerfab.model.camera import Camera
 
     scene = paper_scene()
     scene = replace(scene, saucer=replace(scene.saucer, resolution=60))

@@ -11,9 +11,9 @@ import pytest
 from PIL import Image
 
 from saucerfab.cli import main
-from saucerfab.optimize.pipeline import run_design
 from saucerfab.optimize.prepare import prepare
 from saucerfab.optimize.request import DesignRequest
+from saucerfab.workflow import run_design
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 TINY = dict(resolution=24, image_size=48, max_iters=2, record_times=False)

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from saucerfab.cli import main
-from saucerfab.design import FaceView, load_design
 from saucerfab.errors import ConfigError, ImageError, ShapeError
-from saucerfab.optimize.pipeline import run_design
+from saucerfab.model.design import FaceView
+from saucerfab.model.design_folder import load_design
 from saucerfab.optimize.request import DesignRequest
+from saucerfab.workflow import run_design
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 SMALL = dict(resolution=24, image_size=64, max_iters=25)
@@ -242,7 +243,7 @@ def test_method_fast_skips_the_small_sigma_stage(tmp_path, capsys) -> None:
     assert stages_for("full", "fast", enhanced=False) == stages_for("full", "fast")
     assert stages_for("laplacian") == ABLATION_STAGES["laplacian"]  # and the ablations as written
     req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", method="fast", **TINY_REQ)
-    out = run_design(req, tmp_path / "d", progress=lambda *a: None)
+    out = run_design(req, tmp_path / "d", progress=lambda *a: None).folder
     meta = json.loads((out / "design.json").read_text())
     assert meta["parameters"]["method"] == "fast"
     assert [s["name"] for s in meta["parameters"]["stages"]] == ["bw_sigma_large", "sparse"]
@@ -294,11 +295,11 @@ def test_each_method_has_its_stage_cap_and_max_iters_overrides_it(tmp_path, caps
     with pytest.raises(ConfigError, match="--w-small"):  # known up front when the enhancement is asked for
         DesignRequest(*pics, enhancement="subject", w_small=5.0)
     photos = (SAMPLES / "photos" / "chelsea.png", SAMPLES / "photos" / "coffee.png")
-    out = run_design(DesignRequest(*photos, w_small=5.0, **TINY_REQ), tmp_path / "p", progress=lambda *a: None)
+    out = run_design(DesignRequest(*photos, w_small=5.0, **TINY_REQ), tmp_path / "p", progress=lambda *a: None).folder
     params = json.loads((out / "design.json").read_text())["parameters"]
     assert [s["name"] for s in params["stages"]] == ["plain_sigma_large", "plain_sigma_small", "sparse"]
     assert params["weights_used"]["w_small"] == 5.0 and params["max_iters_used"] == TINY_REQ["max_iters"]
-    out = run_design(DesignRequest(*photos, resolution=12, image_size=32), tmp_path / "q", progress=lambda *a: None)
+    out = run_design(DesignRequest(*photos, resolution=12, image_size=32), tmp_path / "q", progress=lambda *a: None).folder
     params = json.loads((out / "design.json").read_text())["parameters"]
     assert params["max_iters_used"] == 90  # the default's cap for photographs
     assert params["stall_window_used"] == 16
@@ -355,7 +356,7 @@ def _used(folder: Path) -> tuple[dict, list[str]]:
 
 def test_photographs_without_a_subject_are_designed_without_enhancement(tmp_path) -> None:  # noqa: ANN001
     req = DesignRequest(SAMPLES / "photos" / "chelsea.png", SAMPLES / "photos" / "coffee.png", **TINY_REQ)
-    out = run_design(req, tmp_path / "d", progress=lambda *a: None)
+    out = run_design(req, tmp_path / "d", progress=lambda *a: None).folder
     used, stages = _used(out)
     assert used["asked"] == "auto" and used["strategy"] == "none"
     assert "'chelsea.png'" in used["why"] and str(SAMPLES) not in used["why"]  # the file's name, not a path
@@ -367,14 +368,14 @@ def test_photographs_without_a_subject_are_designed_without_enhancement(tmp_path
 
 
 def test_a_photo_with_a_threshold_mask_but_no_plain_background_is_not_enhanced(tmp_path) -> None:  # noqa: ANN001
-    from saucerfab import masks as im
+    from saucerfab.imaging import masks as im
 
     rocket = im.prepare_image(SAMPLES / "photos" / "rocket.jpg", 96)
     heart = im.prepare_image(SAMPLES / "direct_heart.png", 96)
     assert rocket.mask_source == "threshold" and im.plain_background_share(rocket) < im.PLAIN_SHARE
     assert im.plain_background_share(heart) > 0.95
     req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "photos" / "rocket.jpg", **TINY_REQ)
-    used, _ = _used(run_design(req, tmp_path / "d", progress=lambda *a: None))
+    used, _ = _used(run_design(req, tmp_path / "d", progress=lambda *a: None).folder)
     assert used["strategy"] == "none" and "reflected picture 'rocket.jpg': no plain background" in used["why"]
 
 
@@ -398,11 +399,13 @@ def test_enhancement_with_another_ablation_is_refused(capsys) -> None:  # noqa: 
 
 
 def test_the_default_frames_show_each_whole_picture(tmp_path) -> None:  # noqa: ANN001
-    from saucerfab.scene import paper_scene
+    from saucerfab.model.scene import paper_scene
 
     assert DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png").frames == "inscribed"
     out = run_design(DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", **TINY_REQ),
                      tmp_path / "d", progress=lambda *a: None)
-    scene = load_design(out).scene
+    assert out.folder == tmp_path / "d"  # the design returned is the one written
+    scene = load_design(out.folder).scene
+    assert scene == out.scene
     assert scene.direct != paper_scene().direct  # re-aimed at the saucer
     assert scene.camera == paper_scene().camera  # from the same eye

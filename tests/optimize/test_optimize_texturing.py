@@ -7,12 +7,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from saucerfab.design import FRAMED_VIEWS, FaceView
-from saucerfab.heightfield import base_shape
+from saucerfab.model.design import FRAMED_VIEWS, FaceView
+from saucerfab.model.heightfield import base_shape
+from saucerfab.model.scene import Scene
 from saucerfab.optimize.texturing import classify_faces, texture_saucer
-from saucerfab.render.texels import raster_triangles_2d
 from saucerfab.optimize.views import Rig
-from saucerfab.scene import Scene
+from saucerfab.render.texels import raster_triangles_2d
 
 
 def test_classify_faces_truth_table() -> None:

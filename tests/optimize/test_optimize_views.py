@@ -6,10 +6,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from saucerfab.heightfield import base_shape
+from saucerfab.model.heightfield import base_shape
+from saucerfab.model.scene import Scene
 from saucerfab.optimize.views import Rig, visible_faces
 from saucerfab.render import rasterize_hard
-from saucerfab.scene import Scene
 
 
 def test_visible_faces_marks_every_sampled_face_and_keeps_the_last_per_supersample() -> None:

@@ -21,15 +21,16 @@ import trimesh
 
 from saucerfab.check import check_mesh
 from saucerfab.cli import main
-from saucerfab.cups import parse_cup_spec
-from saucerfab.design import Design, synthetic_design
 from saucerfab.errors import ConfigError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.seat import seat_wall
 from saucerfab.fabricate.solid import Solid, build_solid
+from saucerfab.model.cups import parse_cup_spec
+from saucerfab.model.design import Design
+from saucerfab.model.design_folder import synthetic_design
+from saucerfab.model.profiles import load_profile
+from saucerfab.model.scene import Scene
 from saucerfab.optimize.printable import preflight, print_target
-from saucerfab.profiles import load_profile
-from saucerfab.scene import Scene
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 

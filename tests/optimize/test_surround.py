@@ -7,9 +7,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from saucerfab.design import FaceView
 from saucerfab.errors import ConfigError
-from saucerfab.heightfield import base_shape
+from saucerfab.model.camera import Camera
+from saucerfab.model.design import FaceView
+from saucerfab.model.heightfield import base_shape
+from saucerfab.model.scene import Scene
 from saucerfab.optimize.framing import fit_frames
 from saucerfab.optimize.surround import (
     backgrounds_of,
@@ -23,8 +25,6 @@ from saucerfab.optimize.surround import (
 )
 from saucerfab.optimize.texturing import texture_saucer
 from saucerfab.optimize.views import Rig
-from saucerfab.render.camera import Camera
-from saucerfab.scene import Scene
 
 torch = pytest.importorskip("torch")
 

@@ -10,10 +10,13 @@ import pytest
 from scipy import ndimage
 from test_mirror import CIRCLE, HEXAGON, WavySaucer, ray_trace, saucer_xy, scene_with
 
-from saucerfab import mirror
 from saucerfab.errors import ConfigError
-from saucerfab.heightfield import base_shape, make_grid
-from saucerfab.mirror import visible_region
+from saucerfab.model import mirror
+from saucerfab.model.camera import Camera
+from saucerfab.model.cups import PrismCup
+from saucerfab.model.heightfield import base_shape, make_grid
+from saucerfab.model.mirror import visible_region
+from saucerfab.model.scene import ViewFrame, load_scene
 from saucerfab.optimize.framing import fit_frames
 from saucerfab.optimize.regions import (
     best_placement,
@@ -22,8 +25,6 @@ from saucerfab.optimize.regions import (
     region_report,
     split_reflected_facets,
 )
-from saucerfab.render.camera import Camera
-from saucerfab.scene import PrismCup, ViewFrame, load_scene
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 
@@ -130,10 +131,10 @@ def _fg(img: np.ndarray, bg: np.ndarray) -> np.ndarray:
 
 
 def test_two_reflection_design_shows_three_recognisable_views(tmp_path) -> None:  # noqa: ANN001
-    from saucerfab.design import load_design
-    from saucerfab.masks import prepare_image
-    from saucerfab.optimize.pipeline import run_design
+    from saucerfab.imaging.masks import prepare_image
+    from saucerfab.model.design_folder import load_design
     from saucerfab.optimize.request import DesignRequest
+    from saucerfab.workflow import run_design
 
     out = tmp_path / "two"
     req = DesignRequest(
@@ -181,11 +182,11 @@ def test_elliptic_cup_design_goes_through_to_a_printable_export(tmp_path) -> Non
     import json
 
     from saucerfab.check import check_mesh
-    from saucerfab.design import load_design
     from saucerfab.fabricate.options import FabOptions
     from saucerfab.fabricate.pipeline import export_design
-    from saucerfab.optimize.pipeline import run_design
+    from saucerfab.model.design_folder import load_design
     from saucerfab.optimize.request import DesignRequest
+    from saucerfab.workflow import run_design
 
     out = tmp_path / "ellipse"
     req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", cup="ellipse:0.45,0.35,10",

@@ -13,8 +13,8 @@ from test_mirror import CIRCLE, HEXAGON, hit_cup, scene_with
 
 from saucerfab.cli import main
 from saucerfab.errors import ConfigError
-from saucerfab.eyes import DEFAULT_IPD_MM, EyeSpec, eye_positions, eye_weights, parse_eyes
-from saucerfab.heightfield import base_shape
+from saucerfab.model.eyes import DEFAULT_IPD_MM, EyeSpec, eye_positions, eye_weights, parse_eyes
+from saucerfab.model.heightfield import base_shape
 from saucerfab.optimize.request import DesignRequest
 from saucerfab.optimize.viewpoints import (
     EYE_IMAGE_SCALE,
@@ -39,7 +39,7 @@ def _small(cup=CIRCLE, n: int = 24, size: int = 32):  # type: ignore[no-untyped-
 def test_verify_and_design_share_one_definition_of_the_eyes() -> None:
     import saucerfab.verify as verify
 
-    # verify takes the eyes from saucerfab.eyes itself (no re-export module of its own)
+    # verify takes the eyes from saucerfab.model.eyes itself (no re-export module of its own)
     assert verify.EyeSpec is EyeSpec and verify.parse_eyes is parse_eyes and DEFAULT_IPD_MM == 64.0
     assert parse_eyes("point").mode == parse_eyes("design").mode == "design"
     # one word for the design eye alone in every command; the older "point" is read as it
@@ -169,8 +169,8 @@ def test_the_multi_eye_energy_is_the_weighted_sum_of_single_eye_energies() -> No
 def test_the_texture_blend_keeps_what_every_eye_agrees_on() -> None:
     """A flat saucer: every eye wants the same texel colours on faces seen directly, so the blend keeps them."""
     from saucerfab.optimize.texturing import EyeViews, texture_saucer
-    from saucerfab.render.texels import raster_triangles_2d
     from saucerfab.optimize.views import Rig, visible_faces
+    from saucerfab.render.texels import raster_triangles_2d
 
     scene, _ = _small(n=24, size=32)
     flat = np.full((24, 24), 0.03)
@@ -227,7 +227,7 @@ def test_eyes_both_designs_end_to_end_and_records_its_eyes(tmp_path) -> None:  #
 
 
 def test_eyes_point_leaves_the_design_folder_as_before(tmp_path) -> None:  # noqa: ANN001
-    from saucerfab.optimize.pipeline import run_design
+    from saucerfab.workflow import run_design
 
     req = DesignRequest(SAMPLES / "direct_heart.png", SAMPLES / "reflected_star.png", resolution=12, image_size=32,
                         max_iters=2, record_times=False)

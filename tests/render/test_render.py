@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 import torch
+from render_reference import soft_rasterize_reference
 
 from saucerfab.errors import ConfigError
+from saucerfab.model.scene import Scene
 from saucerfab.render import Camera, soft_rasterize
-from saucerfab.scene import Scene
-from render_reference import soft_rasterize_reference
 
 BACKENDS = ["torch", "numba"]
 

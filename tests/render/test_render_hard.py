@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 import torch
-
 from render_reference import rasterize_hard_reference
+
 from saucerfab.errors import ConfigError
-from saucerfab.heightfield import base_shape, make_grid, triangulate
+from saucerfab.model.heightfield import base_shape, make_grid, triangulate
+from saucerfab.model.scene import Saucer, Scene
 from saucerfab.render import Camera, rasterize_hard, render_face_colors_hard, render_textured
-from saucerfab.scene import Saucer, Scene
 
 TAN = 0.2
 

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 import torch
 
-from saucerfab.heightfield import base_shape, make_grid, triangulate
+from saucerfab.model.heightfield import base_shape, make_grid, triangulate
+from saucerfab.model.scene import Saucer, Scene
 from saucerfab.render import Camera, soft_rasterize
 from saucerfab.render.soft_tiles import LANES, TILE_H, TILE_W
-from saucerfab.scene import Saucer, Scene
 
 
 def saucer_views(n: int, size: int, dtype: torch.dtype = torch.float64):

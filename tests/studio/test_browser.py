@@ -31,12 +31,11 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import pytest
-
 import browser
+import pytest
 from live_studio import free_port, http_get, start_studio, stop_studio
 
-from saucerfab.labels import STAGE_LABELS
+from saucerfab.pages.labels import STAGE_LABELS
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "samples"
@@ -101,7 +100,7 @@ _EXPECTED_400 = re.compile(r"Failed to load resource: the server responded with 
 
 
 #: the optimizer's keys as they would read if the page showed them raw ("bw_sigma_large", "bw sigma large",
-#: "E_barrier", "E barrier", "max_iters"): the page shows people's words (saucerfab/labels.py) instead
+#: "E_barrier", "E barrier", "max_iters"): the page shows people's words (saucerfab/pages/labels.py) instead
 RAW_KEY = re.compile(
     r"\b(?:bw|plain)[_ ](?:free[_ ])?sigma|\bsigma[_ ](?:large|small)\b|\bE[_ ][a-z]+|\bmax[_ ]iters\b")
 #: what the progress line said before the first look came

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from starlette.testclient import TestClient
 from studio_helpers import (
     HEART,
     LONG,
@@ -31,7 +32,6 @@ from studio_helpers import (
     wait_in_stage,
     wait_status,
 )
-from starlette.testclient import TestClient
 
 from saucerfab.studio.app import STATIC, create_app
 
@@ -74,10 +74,10 @@ def test_page_options_and_unknown_routes(idle: TestClient) -> None:
 
 
 def test_options_carry_peoples_words_for_the_optimizer_keys(idle: TestClient) -> None:
-    from saucerfab.labels import api_labels
+    from saucerfab.pages.labels import api_labels
 
     labels = idle.get("/api/options").json()["labels"]
-    assert labels == api_labels()  # the page reads the one table (saucerfab/labels.py), never a copy
+    assert labels == api_labels()  # the page reads the one table (saucerfab/pages/labels.py), never a copy
     assert labels["stages"]["bw_sigma_large"].startswith("Smooth shaping, coarse")
     assert "E_barrier" in labels["hidden_energies"] and labels["energies"]["E_visual"] == "image error"
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from saucerfab.cli import main
-from saucerfab.fileio import exclusive_lock
+from saucerfab.files.fileio import exclusive_lock
 from saucerfab.studio.server import is_loopback, url_of
 from saucerfab.studio.workspace import Workspace
 

@@ -27,8 +27,10 @@ import pytest
 from test_verify_accuracy import SCENE, _painted, _photo, _write_print_folder
 
 from saucerfab.cli import main
+from saucerfab.fabricate.scene_file import ViewSpec
+from saucerfab.model.scene import FULL_EXTENT
 from saucerfab.verify import EyeSpec, verify_print
-from saucerfab.verify.printfolder import FULL_EXTENT, VerifyInputError, ViewSpec, load_print_scene
+from saucerfab.verify.printfolder import VerifyInputError, load_print_scene
 
 RES = 48
 #: the rectangles of the test: the direct picture twice as wide as high, the reflected one a quarter as wide as high

@@ -20,11 +20,11 @@ from verify_designs import painted_design, picture
 from verify_reference import cast
 
 from saucerfab.cli import main
-from saucerfab.design import Design
 from saucerfab.fabricate.pipeline import export_design
+from saucerfab.model.design import Design
+from saucerfab.model.eyes import eye_positions
 from saucerfab.verify import EyeSpec, parse_eyes, verify_print
 from saucerfab.verify.core import FULL_COVERAGE, resize_box
-from saucerfab.eyes import eye_positions
 from saucerfab.verify.metrics import PSNR_CAP_DB, best_shift, psnr, shifted, ssim
 
 RES = 96
@@ -103,7 +103,7 @@ def test_moved_eyes_are_scored_against_the_flat_print(flat_print):
 
 def test_prism_and_ellipse_cups_reflect_the_saucer(tmp_path):
     for cup in ("prism:6", "ellipse:0.45,0.35,20"):
-        from saucerfab.scene import parse_cup_spec
+        from saucerfab.model.cups import parse_cup_spec
 
         d = painted_design(0.0)
         d = replace(d, scene=replace(d.scene, cup=parse_cup_spec(cup)))
@@ -269,7 +269,7 @@ def test_a_zipped_obj_is_verified_like_the_plain_one(flat_print, tmp_path):
 
 
 def test_a_two_reflection_print_is_verified_in_all_three_views(tmp_path):
-    from saucerfab.scene import parse_cup_spec
+    from saucerfab.model.cups import parse_cup_spec
 
     d = painted_design(0.0)
     moon = np.round(picture("reflected2_moon.png", 256) * 255).astype(np.uint8)

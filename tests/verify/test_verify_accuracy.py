@@ -22,10 +22,11 @@ import numpy as np
 import pytest
 from verify_reference import _bilinear, camera_frame, camera_rays, cylinder_reflection
 
-from saucerfab.cups import cup_from_dict
+from saucerfab.fabricate.scene_file import CupSpec, ViewSpec
+from saucerfab.model.cups import cup_from_dict
 from saucerfab.verify import DEFAULT_SPP, EyeSpec, verify_print
 from saucerfab.verify.metrics import psnr
-from saucerfab.verify.printfolder import CupSpec, PrintedSurface, ViewSpec
+from saucerfab.verify.printfolder import PrintedSurface
 from saucerfab.verify.raytrace import FULL_COVERAGE, PrintTracer, colour_halves
 
 #: the coordinates ``saucerfab export --cup-diameter-mm 80`` writes for the default scene

@@ -115,7 +115,7 @@ def test_whole_view_psnr_agrees_with_an_independent_numpy_ray_cast(tmp_path):
     reported = result.whole_views[0].psnr_db
 
     scene = load_print_scene(folder)
-    from saucerfab.images import estimate_background
+    from saucerfab.imaging.images import estimate_background
 
     refs = {k: v.astype(np.float64) / 255.0 for k, v in refs8.items()}
     bg = {k: estimate_background(v) for k, v in refs.items()}
@@ -273,9 +273,9 @@ WALL_SHARE_BAND = 0.25
 def test_walls_and_seat_plate_in_view_are_stray_where_they_are_not_the_background(tmp_path, wall):
     from dataclasses import replace
 
-    from saucerfab.design import synthetic_design
     from saucerfab.fabricate.options import FabOptions
     from saucerfab.fabricate.pipeline import export_design
+    from saucerfab.model.design_folder import synthetic_design
     from saucerfab.verify.printfolder import find_mesh_files, read_surface
 
     # a print whose top is the background (white) everywhere: only its walls, base and seat plate can be stray

@@ -7,7 +7,7 @@ read as 3MF with an ``extension_mismatch`` warning. Each reader raises
 anything it cannot read, and bounds sizes and counts before allocating.
 
 Which formats there are, their suffixes, magic numbers and readers are rows
-of :data:`saucerfab.formats.TABLE`; this module only sniffs and dispatches
+of :data:`saucerfab.files.formats.TABLE`; this module only sniffs and dispatches
 (and unpacks the containers: zip and gzip).
 """
 
@@ -23,7 +23,7 @@ from saucerfab.check.limits import Limits, raise_hint
 from saucerfab.check.meshdata import MeshData, ReadError
 from saucerfab.check.readers.safe import Resources
 from saucerfab.check.report import finding
-from saucerfab.formats import READERS
+from saucerfab.files.formats import READERS
 
 #: file suffix -> format key used in reports and printer profiles
 EXTENSIONS = {suffix: f.key for f in READERS.values() for suffix in f.suffixes}
@@ -120,7 +120,7 @@ def read_mesh(path: str | os.PathLike[str], limits: Limits) -> MeshData:
 
 
 def read_stl_bytes(p: Path, data: bytes, limits: Limits, res: Resources | None = None) -> MeshData:
-    """An STL held in memory (from an archive), through the reader contract of :mod:`saucerfab.formats`."""
+    """An STL held in memory (from an archive), through the reader contract of :mod:`saucerfab.files.formats`."""
     from saucerfab.check.readers.stl import read_stl
 
     return read_stl(p, data[:4096], len(data), limits, data)

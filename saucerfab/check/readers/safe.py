@@ -33,7 +33,7 @@ import numpy as np
 
 from saucerfab.check.limits import Limits
 from saucerfab.check.meshdata import ReadError, TextureInfo
-from saucerfab.imageio import PixelLimitError, open_bounded
+from saucerfab.files.imageio import PixelLimitError, open_bounded
 
 #: image formats Pillow may decode for a texture; the ones printer software
 #: takes (PNG, JPEG) and a few that OBJ/VRML files in the wild use

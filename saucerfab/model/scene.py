@@ -1,0 +1,353 @@
+"""The scene: camera, the two view frames, the mirror cup, the saucer, units.
+
+Model frame (paper, section 4): origin at the centre of the cup's bottom, z
+up, lengths in model units (the paper's cup radius is 0.4). The saucer is a
+heightfield over a rectangle on the negative-y side of the cup; the camera
+looks at it from above and behind. Physical size enters only through
+``Scene.cup_diameter_mm``: one model unit is ``mm_per_unit`` millimetres.
+
+A *view frame* is what one image covers: a look-at camera from
+``Scene.camera`` towards ``ViewFrame.target`` with z up, and SoftRas's
+perspective, where ``viewing_angle_deg`` is the half field of view:
+``tan(viewing_angle) = half the frame's width / depth along the view axis``.
+Each input picture keeps its aspect: it covers a centred rectangle of its
+square view frame (``ViewFrame.extent``), the rest is its background.
+
+The cup shapes are in :mod:`saucerfab.model.cups`.
+
+Everything here is a frozen dataclass validated on construction; build one
+from TOML with :func:`load_scene` and write one with :func:`scene_to_toml`.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from saucerfab.errors import ConfigError, GeometryError
+from saucerfab.files.tomlfile import read_toml
+from saucerfab.model.cups import CircleCup, Cup, cup_from_dict, cup_to_dict
+from saucerfab.model.validate import as_vector, check_keys, check_positive
+
+Vec2 = tuple[float, float]
+Vec3 = tuple[float, float, float]
+
+#: resolutions we accept; outside them memory or quality make no sense
+MIN_IMAGE_SIZE, MAX_IMAGE_SIZE = 8, 4096
+MIN_GRID, MAX_GRID = 4, 1024
+#: least sine of a view axis's angle to the vertical (see Scene.__post_init__)
+MIN_VIEW_TILT = 1e-9
+#: the views a scene can have, in order: each has a frame, an input picture and a rendered image
+VIEW_NAMES = ("direct", "reflected", "reflected2")
+#: a view's extent when its picture fills the whole square (a square picture; files without extents)
+FULL_EXTENT = (1.0, 1.0)
+#: how close to 1 the larger side of an extent must be (written values are rounded)
+EXTENT_TOLERANCE = 1e-6
+
+
+# --------------------------------------------------------------------------- views
+
+
+@dataclass(frozen=True)
+class ViewFrame:
+    """One view: where the camera looks, how wide, at what resolution.
+
+    Attributes:
+        target: point the view axis passes through, model units.
+        viewing_angle_deg: SoftRas's ``viewing_angle``, the half field of view
+            in degrees: tan(angle) = half frame width / depth along the axis.
+        image_size: rendered image width = height, pixels.
+        extent: (ex, ey) the picture's half width and half height in the view's NDC: the
+            picture covers ``|x_ndc| <= ex``, ``|y_ndc| <= ey`` of the square view, centred
+            (each in (0, 1], the larger 1: a 2:1 picture has (1, 0.5)); the rest of the
+            square is the picture's background (:func:`saucerfab.imaging.fitting.fit_square` pads it so).
+    """
+
+    target: Vec3
+    viewing_angle_deg: float
+    image_size: int = 512
+    extent: Vec2 = FULL_EXTENT
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "target", as_vector("view target", self.target, 3))
+        ext = as_vector("view extent", self.extent, 2)
+        if not all(0.0 < e <= 1.0 for e in ext) or abs(max(ext) - 1.0) > EXTENT_TOLERANCE:
+            raise ConfigError(
+                f"a view's extent is the picture's half width and half height in the square view, each in "
+                f"(0, 1] and the larger 1 (a 2:1 picture: [1.0, 0.5]); got {list(ext)}"
+            )
+        object.__setattr__(self, "extent", tuple(1.0 if e >= 1.0 - EXTENT_TOLERANCE else e for e in ext))
+        check_positive("viewing_angle_deg", self.viewing_angle_deg)
+        if self.viewing_angle_deg >= 89.0:
+            raise ConfigError(
+                f"viewing_angle_deg is the half field of view and must be below 89 degrees, "
+                f"got {self.viewing_angle_deg}"
+            )
+        if not isinstance(self.image_size, int) or not (
+            MIN_IMAGE_SIZE <= self.image_size <= MAX_IMAGE_SIZE
+        ):
+            raise ConfigError(
+                f"image_size must be an integer in [{MIN_IMAGE_SIZE}, {MAX_IMAGE_SIZE}], "
+                f"got {self.image_size!r}"
+            )
+
+
+# --------------------------------------------------------------------------- saucer
+
+
+@dataclass(frozen=True)
+class Saucer:
+    """The saucer heightfield's footprint, resolution and height bound.
+
+    Attributes:
+        x_range: (x0, x1), model units.
+        y_range: (y0, y1), model units.
+        resolution: vertices per side of the square grid (paper: 150).
+        delta: bound on height change, |z - h| < delta, model units (paper: 0.05).
+    """
+
+    x_range: Vec2 = (-0.5, 0.5)
+    y_range: Vec2 = (-1.5, -0.5)
+    resolution: int = 150
+    delta: float = 0.05
+
+    def __post_init__(self) -> None:
+        xr = as_vector("saucer x_range", self.x_range, 2)
+        yr = as_vector("saucer y_range", self.y_range, 2)
+        object.__setattr__(self, "x_range", xr)
+        object.__setattr__(self, "y_range", yr)
+        if not xr[0] < xr[1] or not yr[0] < yr[1]:
+            raise ConfigError(
+                f"saucer ranges must be increasing (min, max), got x {xr} and y {yr}"
+            )
+        if not isinstance(self.resolution, int) or not (MIN_GRID <= self.resolution <= MAX_GRID):
+            raise ConfigError(
+                f"saucer resolution must be an integer in [{MIN_GRID}, {MAX_GRID}], "
+                f"got {self.resolution!r}"
+            )
+        check_positive("delta", self.delta)
+
+    @property
+    def size(self) -> Vec2:
+        """(width along x, depth along y), model units."""
+        return (self.x_range[1] - self.x_range[0], self.y_range[1] - self.y_range[0])
+
+
+# --------------------------------------------------------------------------- scene
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Everything geometric about one design.
+
+    Attributes:
+        camera: eye position P, model units.
+        direct: the frame of the image seen directly on the saucer.
+        reflected: the frame of the image seen in the mirror cup.
+        cup: the mirror cup (its bottom centre is the origin).
+        saucer: the saucer footprint and resolution.
+        cup_diameter_mm: physical width of the real cup across its footprint
+            (the cup's ``width_units`` in mm: a circle's diameter, an ellipse's
+            2a, a prism's 2 * circumradius), which fixes the model-to-millimetre scale.
+        reflected2: the frame of a second reflected image (prism cups, two
+            reflections, each in its own facet region); None: the
+            ``reflected`` frame is used for both.
+    """
+
+    camera: Vec3 = (0.0, -5.5, 5.0)
+    direct: ViewFrame = ViewFrame((0.0, 0.0, -0.8), 4.5, 512)
+    reflected: ViewFrame = ViewFrame((0.0, 0.0, 0.1), 3.0, 512)
+    cup: Cup = field(default_factory=CircleCup)
+    saucer: Saucer = field(default_factory=Saucer)
+    cup_diameter_mm: float = 80.0
+    reflected2: ViewFrame | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "camera", as_vector("camera", self.camera, 3))
+        check_positive("cup_diameter_mm", self.cup_diameter_mm)
+        cam = np.array(self.camera)
+        views = [("direct", self.direct), ("reflected", self.reflected)]
+        if self.reflected2 is not None:
+            views.append(("reflected2", self.reflected2))
+        for name, view in views:
+            if np.linalg.norm(np.array(view.target) - cam) < 1e-9:
+                raise ConfigError(f"the {name} view target coincides with the camera {self.camera}")
+        if bool(self.cup.contains(cam[:2])):
+            raise GeometryError(
+                f"the camera {self.camera} stands inside the cup's footprint; "
+                "move it outside (the paper uses (0, -5.5, 5))"
+            )
+        for name, view in views:
+            # A look-at camera takes its "up" from the world's z: on a vertical
+            # view axis that is undefined (the renderer would fail much later,
+            # deep in a design or a verify). The bound is above the renderer's
+            # own (1e-12), so whatever it would refuse is refused here. (After
+            # the camera-in-cup check: a camera over the cup is the real mistake.)
+            axis = np.array(view.target) - cam
+            if float(np.hypot(axis[0], axis[1])) / float(np.linalg.norm(axis)) < MIN_VIEW_TILT:
+                raise ConfigError(
+                    f"the {name} view axis, from the camera {self.camera} to its target {view.target}, "
+                    "is vertical; a view's up direction is then undefined. Move the target (or the "
+                    "camera) sideways so the two are not on one vertical line (the paper looks down "
+                    "at about 45 degrees)"
+                )
+        # The saucer may not overlap the cup: test the footprint rectangle
+        # densely against the cup (exact for circles, conservative enough for
+        # the others at this sampling), then the cup outline against the box.
+        (x0, x1), (y0, y1) = self.saucer.x_range, self.saucer.y_range
+        gx, gy = np.meshgrid(np.linspace(x0, x1, 65), np.linspace(y0, y1, 65))
+        pts = np.stack([gx, gy], axis=-1)
+        outline = self.cup.boundary()
+        in_box = (
+            (outline[:, 0] > x0) & (outline[:, 0] < x1) & (outline[:, 1] > y0) & (outline[:, 1] < y1)
+        )
+        if self.cup.contains(pts).any() or in_box.any():
+            raise GeometryError(
+                f"the saucer x {self.saucer.x_range}, y {self.saucer.y_range} overlaps the "
+                f"{self.cup.kind} cup; move the saucer away from the cup or shrink the cup"
+            )
+
+    @property
+    def cup_width_units(self) -> float:
+        """The cup's width in model units that ``cup_diameter_mm`` refers to."""
+        return self.cup.width_units
+
+    @property
+    def mm_per_unit(self) -> float:
+        """Millimetres per model unit."""
+        return self.cup_diameter_mm / self.cup_width_units
+
+    def with_changes(self, **changes: Any) -> "Scene":
+        """A copy with top-level fields replaced (validated again)."""
+        return replace(self, **changes)
+
+
+def paper_scene() -> Scene:
+    """The paper's section 4 setup: the default preset."""
+    return Scene()
+
+
+PRESETS = {"paper": paper_scene}
+
+
+# --------------------------------------------------------------------------- dict / TOML
+
+
+def scene_to_dict(scene: Scene) -> dict[str, Any]:
+    """A plain-data (JSON/TOML-ready) description of ``scene``."""
+
+    def view(v: ViewFrame) -> dict[str, Any]:
+        return {
+            "target": list(v.target),
+            "viewing_angle_deg": v.viewing_angle_deg,
+            "image_size": v.image_size,
+            "extent": list(v.extent),
+        }
+
+    s = scene.saucer
+    extra = {"reflected2": view(scene.reflected2)} if scene.reflected2 is not None else {}
+    return {
+        "camera": list(scene.camera),
+        "cup_diameter_mm": scene.cup_diameter_mm,
+        "direct": view(scene.direct),
+        "reflected": view(scene.reflected),
+        **extra,
+        "cup": cup_to_dict(scene.cup),
+        "saucer": {
+            "x_range": list(s.x_range),
+            "y_range": list(s.y_range),
+            "resolution": s.resolution,
+            "delta": s.delta,
+        },
+    }
+
+
+_TOP_KEYS = {"camera", "cup_diameter_mm", "direct", "reflected", "reflected2", "cup", "saucer", "preset"}
+
+
+def scene_from_dict(d: dict[str, Any], base: Scene | None = None) -> Scene:
+    """Build a scene from plain data; missing keys keep ``base``'s (default: paper) values.
+
+    A ``preset = "paper"`` key selects the base.
+    """
+    if not isinstance(d, dict):
+        raise ConfigError(f"a scene must be a table, got {type(d).__name__}")
+    check_keys("the scene", d, _TOP_KEYS)
+    if "preset" in d:
+        if not isinstance(d["preset"], str) or d["preset"] not in PRESETS:
+            raise ConfigError(f"unknown scene preset {d['preset']!r}; known: {sorted(PRESETS)}")
+        base = PRESETS[d["preset"]]()
+    base = base or paper_scene()
+    kw: dict[str, Any] = {}
+    try:
+        if "camera" in d:
+            kw["camera"] = d["camera"]
+        if "cup_diameter_mm" in d:
+            kw["cup_diameter_mm"] = d["cup_diameter_mm"]
+        for name in ("direct", "reflected", "reflected2"):
+            if name in d:
+                v = d[name]
+                if not isinstance(v, dict):
+                    raise ConfigError(f"[{name}] must be a table, got {v!r}")
+                check_keys(f"[{name}]", v, {"target", "viewing_angle_deg", "image_size", "extent"})
+                start = getattr(base, name) or base.reflected
+                kw[name] = replace(start, **v)
+        if "saucer" in d:
+            check_keys("[saucer]", d["saucer"], {"x_range", "y_range", "resolution", "delta"})
+            kw["saucer"] = replace(base.saucer, **d["saucer"])
+        if "cup" in d:
+            kw["cup"] = cup_from_dict(d["cup"], base.cup.kind)
+        return replace(base, **kw)
+    except TypeError as exc:  # wrong arity from a malformed table
+        raise ConfigError(f"invalid scene description: {exc}") from None
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} as TOML")
+
+
+def scene_to_toml(scene: Scene) -> str:
+    """TOML text for ``scene`` that :func:`load_scene` reads back to an equal scene."""
+    d = scene_to_dict(scene)
+    lines = ["# saucerfab scene (model units; see saucerfab/model/scene.py)"]
+    for k in ("camera", "cup_diameter_mm"):
+        lines.append(f"{k} = {_toml_value(d[k])}")
+    for table in ("direct", "reflected", "reflected2", "cup", "saucer"):
+        if table not in d:
+            continue
+        lines.append(f"\n[{table}]")
+        for k, v in d[table].items():
+            lines.append(f"{k} = {_toml_value(v)}")
+    return "\n".join(lines) + "\n"
+
+
+def load_scene(source: str | os.PathLike[str]) -> Scene:
+    """Load a scene from a TOML file path or a preset name ("paper")."""
+    if isinstance(source, str) and source in PRESETS:
+        return PRESETS[source]()
+    path = Path(source)
+    if not path.is_file():
+        raise ConfigError(
+            f"scene file {str(path)!r} not found; give a TOML file or a preset ({sorted(PRESETS)})"
+        )
+    data = read_toml(
+        path,
+        "scene file",
+        max_bytes=1_000_000,
+        size_hint="a scene is a few lines of TOML",
+        nesting_hint="a scene is a few tables of numbers and short lists",
+    )
+    return scene_from_dict(data)
+
