@@ -6,6 +6,11 @@ or an export themselves: those are jobs of :class:`~saucerfab.studio.jobs.JobQue
 started in the app's lifespan and stopped (workers SIGINTed, so their
 checkpoints are saved) when it ends.
 
+Every request signs in first (:mod:`saucerfab.studio.auth`, behind the
+Host/Origin guard); the routes see the user, show each user their own runs
+and uploads (the admin every run) and answer another user's run as an
+unknown one (404: it does not say the run is there).
+
 Errors: a :class:`~saucerfab.studio.workspace.StudioError` answers its own
 status, any other :class:`~saucerfab.errors.SaucerfabError` (the library's
 words for bad input) 400, and an unexpected fault 500 ``internal error``,
@@ -36,6 +41,7 @@ from starlette.staticfiles import StaticFiles
 from saucerfab.errors import SaucerfabError
 from saucerfab.pages.labels import api_labels
 from saucerfab.studio import options as opts
+from saucerfab.studio.auth import USER_KEY, Auth, SignIn, User, login_routes, session_cookie_name
 from saucerfab.studio.guard import LOOPBACK_NAMES, HostOriginGuard
 from saucerfab.studio.jobs import DEFAULT_JOBS, Job, JobQueue
 from saucerfab.studio.results import SERVED_SUFFIXES, design_results, export_details, thumb_url, viewer_page
@@ -43,12 +49,15 @@ from saucerfab.studio.workspace import (
     FINAL,
     MAX_UPLOAD_BYTES,
     ROLES,
+    RUN_ID_RE,
     Conflict,
     NotFound,
     StudioError,
     TooLarge,
     Workspace,
+    no_such_run,
     now_iso,
+    owner_of,
 )
 
 log = logging.getLogger("saucerfab.studio")
@@ -109,6 +118,7 @@ def create_app(
     max_pixels: int | None = None,
     grace_s: float | None = None,
     allowed_hosts: Sequence[str] | None = LOOPBACK_NAMES,
+    auth: Auth | None = None,
 ) -> Starlette:
     """The studio app over ``workspace`` (made a workspace if new or empty).
 
@@ -123,6 +133,8 @@ def create_app(
             default; None: any, for a studio shared on the network); requests
             from another site's page are refused either way
             (:mod:`saucerfab.studio.guard`).
+        auth: the users and their tokens (:mod:`saucerfab.studio.auth`); None:
+            no sign-in, every request is the shared user's (``--no-auth``).
     """
     from saucerfab.imaging.images import DEFAULT_MAX_PIXELS
 
@@ -131,6 +143,35 @@ def create_app(
     pixels = DEFAULT_MAX_PIXELS if max_pixels is None else int(max_pixels)
     samples = sample_files()
     choices: dict[str, Any] = {}
+    auth = Auth(None, "--no-auth") if auth is None else auth
+    cookie = session_cookie_name(ws.root)
+
+    # ------------------------------------------------------------------ who asks
+
+    def _me(request: Request) -> User:
+        return request.scope[USER_KEY]  # set by SignIn before any route runs
+
+    def _uploads(request: Request) -> Workspace:
+        """The workspace as the signed-in user sees its uploads."""
+        return ws.for_user(_me(request).name)
+
+    def _visible(request: Request) -> dict[str, Any]:
+        """The record of the run the path names, when the signed-in user may see it; else the NotFound of a
+        run that is not there (another user's run is not confirmed to exist, however its id was found)."""
+        run_id, me = request.path_params["id"], _me(request)
+        try:
+            rec = ws.read_run(run_id)
+        except NotFound:
+            if me.admin or not RUN_ID_RE.match(run_id):
+                raise
+            raise no_such_run(run_id) from None  # a damaged record of another user's run says no more either
+        if not me.sees(owner_of(rec)):
+            raise no_such_run(run_id)
+        return rec
+
+    async def _run(request: Request) -> str:
+        """The id of the run the path names, once :func:`_visible` let it through."""
+        return str((await run_in_threadpool(_visible, request))["id"])
 
     # ------------------------------------------------------------------ page and options
 
@@ -140,6 +181,10 @@ def create_app(
             return _error(404, "the studio page is not installed (saucerfab/data/studio/index.html); "
                                "reinstall saucerfab")
         return FileResponse(page, headers={"Cache-Control": "no-cache"})
+
+    async def session(request: Request) -> Response:
+        me = _me(request)
+        return _json_response({"auth": auth.required, "user": me.name if auth.required else None, "admin": me.admin})
 
     async def options(request: Request) -> Response:
         if not choices:
@@ -161,7 +206,8 @@ def create_app(
         declared = request.headers.get("content-length", "")
         if declared.isdigit() and int(declared) > max_upload_bytes:
             raise TooLarge(_too_large(int(declared)))
-        fd, tmp = ws.incoming()
+        mine = _uploads(request)
+        fd, tmp = mine.incoming()
         try:
             size = 0
             with os.fdopen(fd, "wb") as fh:
@@ -172,7 +218,7 @@ def create_app(
                     fh.write(chunk)
             if size == 0:
                 raise StudioError("the upload is empty: send the file's bytes as the request body (not a form)")
-            rec = await run_in_threadpool(ws.store_upload, tmp, role, request.query_params.get("name"),
+            rec = await run_in_threadpool(mine.store_upload, tmp, role, request.query_params.get("name"),
                                           max_pixels=pixels)
         finally:
             tmp.unlink(missing_ok=True)
@@ -198,18 +244,21 @@ def create_app(
             raise NotFound(f"no sample {name[:40]!r}; the samples are {', '.join(samples)}")
         src, role = samples[name]
         role = request.query_params.get("role", role)
+        mine = _uploads(request)
 
         def copy() -> dict[str, Any]:
-            fd, tmp = ws.incoming()
+            fd, tmp = mine.incoming()
             with os.fdopen(fd, "wb") as fh:
                 fh.write(src.read_bytes())
-            return ws.store_upload(tmp, role, src.name, max_pixels=pixels)
+            return mine.store_upload(tmp, role, src.name, max_pixels=pixels)
 
         return _json_response(_upload_doc(await run_in_threadpool(copy)), 201)
 
     async def upload_thumb(request: Request) -> Response:
-        d = ws.upload_dir(request.path_params["id"])
-        return FileResponse(d / "thumb.png", media_type="image/png", headers={"Cache-Control": "max-age=86400"})
+        d = _uploads(request).upload_dir(request.path_params["id"])
+        # private: a user's picture is not for a shared cache (a proxy) to hand to another
+        return FileResponse(d / "thumb.png", media_type="image/png",
+                            headers={"Cache-Control": "private, max-age=86400"})
 
     async def upload_fitted(request: Request) -> Response:
         from saucerfab.imaging.fitting import FITS
@@ -222,18 +271,20 @@ def create_app(
         size_text = q.get("size", "256")
         if not size_text.isdigit() or not FITTED_PX[0] <= int(size_text) <= FITTED_PX[1]:
             raise StudioError(f"size must be a whole number of pixels from {FITTED_PX[0]} to {FITTED_PX[1]}")
-        data = await run_in_threadpool(_fitted_png, ws, upload_id, fit, q.get("background"), int(size_text), pixels)
-        return Response(data, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
+        data = await run_in_threadpool(_fitted_png, _uploads(request), upload_id, fit, q.get("background"),
+                                       int(size_text), pixels)
+        return Response(data, media_type="image/png", headers={"Cache-Control": "private, max-age=3600"})
 
     # ------------------------------------------------------------------ runs
 
-    def _summary(rec: dict[str, Any]) -> dict[str, Any]:
+    def _summary(rec: dict[str, Any], me: User) -> dict[str, Any]:
         d = ws.runs / rec["id"]
         return {k: rec.get(k) for k in ("id", "title", "status", "created", "error")} | {
-            "thumb_url": thumb_url(rec["id"], d, rec)}
+            "thumb_url": thumb_url(rec["id"], d, rec)} | ({"owner": owner_of(rec)} if me.admin else {})
 
     def _full(run_id: str) -> dict[str, Any]:
         rec = ws.read_run(run_id)
+        rec["owner"] = owner_of(rec)
         d = ws.run_dir(run_id)
         try:
             progress = json.loads((d / "progress.json").read_text(encoding="utf-8"))
@@ -246,9 +297,10 @@ def create_app(
 
     async def create_run(request: Request) -> Response:
         body = await _body_json(request)
-        options, title = await run_in_threadpool(opts.check_options, ws, body)
-        await run_in_threadpool(opts.validate_run, ws, options)
-        rec = await run_in_threadpool(ws.create_run, options, title)
+        mine = _uploads(request)
+        options, title = await run_in_threadpool(opts.check_options, mine, body)
+        await run_in_threadpool(opts.validate_run, mine, options)
+        rec = await run_in_threadpool(ws.create_run, options, title, _me(request).name)
         _submit(Job("design", rec["id"]))
         return _json_response(await run_in_threadpool(_full, rec["id"]), 201)
 
@@ -259,13 +311,15 @@ def create_app(
             log.warning("%s", exc)
 
     async def list_runs(request: Request) -> Response:
-        return _json_response([_summary(r) for r in await run_in_threadpool(ws.list_runs)])
+        me = _me(request)
+        return _json_response([_summary(r, me) for r in await run_in_threadpool(ws.list_runs)
+                               if me.sees(owner_of(r))])
 
     async def get_run(request: Request) -> Response:
-        return _json_response(await run_in_threadpool(_full, request.path_params["id"]))
+        return _json_response(await run_in_threadpool(_full, await _run(request)))
 
     async def cancel(request: Request) -> Response:
-        run_id = request.path_params["id"]
+        run_id = await _run(request)
 
         def change(rec: dict[str, Any]) -> None:
             status = rec.get("status")
@@ -284,7 +338,7 @@ def create_app(
         return _json_response(await run_in_threadpool(_full, run_id))
 
     async def resume(request: Request) -> Response:
-        run_id = request.path_params["id"]
+        run_id = await _run(request)
 
         def change(rec: dict[str, Any]) -> None:
             status = rec.get("status")
@@ -297,35 +351,37 @@ def create_app(
         return _json_response(await run_in_threadpool(_full, run_id))
 
     async def duplicate(request: Request) -> Response:
-        run_id = request.path_params["id"]
+        run_id = await _run(request)
         changes = await _body_json(request)
         old = await run_in_threadpool(ws.read_run, run_id)
         merged = opts.merged_options(old.get("options", {}), changes)
         if "title" not in merged:
             merged["title"] = f"{old.get('title', run_id)} (copy)"
-        options, title = await run_in_threadpool(opts.check_options, ws, merged)
-        await run_in_threadpool(opts.validate_run, ws, options)
-        rec = await run_in_threadpool(ws.create_run, options, title)
+        mine = _uploads(request)  # the admin's view finds the uploads of the run it copies, whoever's they are
+        options, title = await run_in_threadpool(opts.check_options, mine, merged)
+        await run_in_threadpool(opts.validate_run, mine, options)
+        rec = await run_in_threadpool(ws.create_run, options, title, _me(request).name)
         _submit(Job("design", rec["id"]))
         return _json_response(await run_in_threadpool(_full, rec["id"]), 201)
 
     async def delete_run(request: Request) -> Response:
-        await run_in_threadpool(ws.delete_run, request.path_params["id"])
-        return _json_response({"deleted": request.path_params["id"]})
+        run_id = await _run(request)
+        await run_in_threadpool(ws.delete_run, run_id)
+        return _json_response({"deleted": run_id})
 
     async def events(request: Request) -> Response:
-        run_id = request.path_params["id"]
+        run_id = await _run(request)
         d = ws.run_dir(run_id)
         return StreamingResponse(_event_stream(ws, run_id, d), media_type="text/event-stream",
                                  headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
 
     async def run_file(request: Request) -> Response:
-        path = _inside(ws.run_dir(request.path_params["id"]), request.path_params["path"])
+        path = _inside(ws.run_dir(await _run(request)), request.path_params["path"])
         return FileResponse(path, media_type=SERVED_SUFFIXES[path.suffix.lower()],
                             headers={"Cache-Control": "no-cache", "X-Content-Type-Options": "nosniff"})
 
     async def viewer(request: Request) -> Response:
-        run_id = request.path_params["id"]
+        run_id = await _run(request)
         d = ws.run_dir(run_id)
         if not (d / "design" / "design.json").is_file():
             status = ws.read_run(run_id).get("status")
@@ -339,7 +395,7 @@ def create_app(
         from saucerfab.files.formats import FORMATS
         from saucerfab.model.profiles import list_profiles
 
-        run_id = request.path_params["id"]
+        run_id = await _run(request)
         body = await _body_json(request)
         if not isinstance(body, dict):
             raise StudioError('the export options must be a JSON object, e.g. {"printer": "j55", "formats": ["3mf"]}')
@@ -379,13 +435,13 @@ def create_app(
         return entry
 
     async def get_export(request: Request) -> Response:
-        run_id, printer = request.path_params["id"], request.path_params["printer"]
+        run_id, printer = await _run(request), request.path_params["printer"]
         d = ws.run_dir(run_id)
         entry = await run_in_threadpool(_export_entry, run_id, printer)
         return _json_response(await run_in_threadpool(export_details, run_id, d, printer, entry))
 
     async def export_zip(request: Request) -> Response:
-        run_id, printer = request.path_params["id"], request.path_params["printer"]
+        run_id, printer = await _run(request), request.path_params["printer"]
         d = ws.run_dir(run_id)
         entry = await run_in_threadpool(_export_entry, run_id, printer)
         path = d / "exports" / f"{printer}.zip"
@@ -430,6 +486,8 @@ def create_app(
     routes = [
         Route("/", index),
         Mount("/static", StaticFiles(directory=STATIC, check_dir=False), name="static"),
+        *(login_routes(auth, cookie) if auth.required else []),
+        Route("/api/session", session),
         Route("/api/options", options),
         Route("/api/uploads", upload, methods=["POST"]),
         Route("/api/samples/{name}", sample_picture, methods=["GET"]),
@@ -452,13 +510,16 @@ def create_app(
     ]
     app = Starlette(
         routes=routes,
-        middleware=[Middleware(HostOriginGuard, allowed_hosts=allowed_hosts)],
+        # the guard first: a rebound name or another site's request is refused before anyone signs in
+        middleware=[Middleware(HostOriginGuard, allowed_hosts=allowed_hosts),
+                    Middleware(SignIn, auth=auth, cookie=cookie)],
         lifespan=lifespan,
         exception_handlers={StudioError: studio_error, SaucerfabError: studio_error, HTTPException: http_error,
                             ClientDisconnect: client_gone, Exception: server_error},
     )
     app.state.workspace = ws
     app.state.queue = queue
+    app.state.auth = auth
     return app
 
 

@@ -1,6 +1,9 @@
-"""Serving the studio: the workspace's lock, uvicorn, the banner, ``--open``.
+"""Serving the studio: its sign-in, the workspace's lock, uvicorn, the banner, ``--open``.
 
-:func:`serve` is what ``saucerfab studio`` runs. One server per workspace:
+:func:`serve` is what ``saucerfab studio`` runs. It asks for a token
+(:mod:`saucerfab.studio.auth`): a random one printed in the banner's URL
+unless one is given, and on a network address always, unless ``--no-auth``.
+One server per workspace:
 it holds an ``flock`` on ``WORKSPACE/.lock`` while it runs (freed by the
 kernel however the process ends), so a second server on the same folder
 stops at once with a clear message instead of two job queues fighting over
@@ -10,11 +13,14 @@ the same runs.
 from __future__ import annotations
 
 import ipaddress
+import os
 import socket
 import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
+from urllib.parse import quote
 
 from saucerfab.errors import ConfigError
 from saucerfab.files.fileio import exclusive_lock
@@ -61,6 +67,17 @@ def _check_port(host: str, port: int) -> None:
             ) from None
 
 
+def server_config(app: Any, host: str, port: int, log_level: str = "warning") -> Any:
+    """The ``uvicorn.Config`` the studio serves ``app`` with: its logs never show a token
+    (:func:`saucerfab.studio.auth.uvicorn_log_config`; the access log would print ``?token=``)."""
+    import uvicorn
+
+    from saucerfab.studio.auth import uvicorn_log_config
+
+    return uvicorn.Config(app, host=host, port=port, log_level=log_level, lifespan="on",
+                          timeout_graceful_shutdown=SHUTDOWN_WAIT_S, log_config=uvicorn_log_config())
+
+
 def serve(
     workspace: str | Path = DEFAULT_WORKSPACE,
     *,
@@ -69,15 +86,26 @@ def serve(
     jobs: int = DEFAULT_JOBS,
     max_upload_bytes: int = MAX_UPLOAD_BYTES,
     open_browser: bool = False,
+    token: str | None = None,
+    token_file: str | Path | None = None,
+    no_auth: bool = False,
 ) -> int:
     """Serve the studio until Ctrl-C; returns the exit code.
 
+    Args:
+        token, token_file: the sign-in token, or a file of one token or of
+            ``USER:TOKEN`` lines (at most one of them and ``$SAUCERFAB_STUDIO_TOKEN``);
+            none: a random token, printed in the banner's URL.
+        no_auth: no sign-in (anyone who can reach the studio uses it).
+
     Raises:
-        ConfigError: a bad workspace, another studio on it, a port in use, bad numbers.
+        ConfigError: a bad workspace, another studio on it, a port in use, bad
+            numbers, contradictory or weak tokens, a network host without a token.
     """
     import uvicorn
 
     from saucerfab.studio.app import create_app
+    from saucerfab.studio.auth import resolve_auth
     from saucerfab.studio.guard import LOOPBACK_NAMES
 
     if not 0 <= port <= 65535:
@@ -86,6 +114,7 @@ def serve(
         raise ConfigError(f"--jobs must be at least 1, got {jobs}")
     if max_upload_bytes < 1:
         raise ConfigError(f"--max-upload-mb must be positive, got {max_upload_bytes / 2**20:g}")
+    auth, made = resolve_auth(token, token_file, no_auth, host=host, loopback=is_loopback(host), env=os.environ)
     ws = Workspace(workspace)
     busy = lambda: ConfigError(  # noqa: E731
         f"another saucerfab studio is already serving the workspace {str(ws.root)!r}; open its page, or give "
@@ -94,17 +123,20 @@ def serve(
     with exclusive_lock(ws.root / ".lock", busy):
         _check_port(host, port)
         app = create_app(ws.root, jobs=jobs, max_upload_bytes=max_upload_bytes,
-                         allowed_hosts=LOOPBACK_NAMES if is_loopback(host) else None)
+                         allowed_hosts=LOOPBACK_NAMES if is_loopback(host) else None, auth=auth)
         url = url_of(host, port)
+        if made is not None:  # printed once, here: the URL signs the browser in (and the token leaves it)
+            url += "?token=" + quote(made, safe="")
         print(f"saucerfab studio: {url}  (workspace {ws.root}; Ctrl-C stops it, running designs are kept "
               "and resume later)", flush=True)
-        if not is_loopback(host):
-            print(f"saucerfab studio: warning: serving on {host}: anyone on the network who can reach this "
-                  "machine can use the studio and its files; there is no authentication", file=sys.stderr,
-                  flush=True)
-        config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="on",
-                                timeout_graceful_shutdown=SHUTDOWN_WAIT_S)
-        server = uvicorn.Server(config)
+        if auth.required and made is None:  # a given token is not printed: a service's output goes to its log
+            who = "each user with their own token from" if len(auth.tokens or {}) > 1 else "with the token of"
+            print(f"saucerfab studio: sign in {who} {auth.source}", flush=True)
+        if not auth.required and not is_loopback(host):
+            print(f"saucerfab studio: warning: serving on {host} with --no-auth: anyone on the network who can "
+                  "reach this machine can use the studio and its files; there is no authentication",
+                  file=sys.stderr, flush=True)
+        server = uvicorn.Server(server_config(app, host, port))
         if open_browser:
             threading.Thread(target=_open_when_up, args=(server, url), daemon=True).start()
         server.run()

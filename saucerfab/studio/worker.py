@@ -31,7 +31,7 @@ from typing import Any
 
 from saucerfab.errors import Interrupted, SaucerfabError
 from saucerfab.files.fileio import write_bytes_atomic
-from saucerfab.studio.workspace import Workspace, now_iso, write_json
+from saucerfab.studio.workspace import Workspace, now_iso, owner_of, write_json
 
 #: the most progress.json writes a second (the page polls it through the event stream)
 WRITES_PER_S = 4.0
@@ -232,7 +232,7 @@ def _design_job(ws: Workspace, run_id: str, watch: _ParentWatch) -> None:
         from saucerfab.studio.options import design_request
 
         rec = ws.read_run(run_id)
-        request = design_request(ws, rec["options"])
+        request = design_request(ws.for_user(owner_of(rec)), rec["options"])  # the owner's uploads
         out = folder / "design"
         reporter = _Reporter(folder, request, watch, ws.scrub)
         if not (out / "design.json").is_file():  # done before: a resume only has the verify left

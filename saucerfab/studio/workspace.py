@@ -10,11 +10,18 @@ blocking file work, safe from several threads and processes at once:
 * nothing from a client names a path: run ids are checked against
   :data:`RUN_ID_RE`, upload ids against :data:`UPLOAD_ID_RE`, and uploads are
   stored under their content hash with a sanitised name.
+
+Users (issue 39): a run records its ``owner``; each user's uploads are their
+own (:meth:`Workspace.for_user`), so one designer's file names and pictures
+never show in another's page. The shared user (:data:`SHARED_USER`: the one
+user of a single token or of ``--no-auth``, and the admin of a token file)
+keeps the folders of before: ``uploads/``, and the runs that record no owner.
 """
 
 from __future__ import annotations
 
 import contextlib
+import copy
 import hashlib
 import json
 import os
@@ -56,6 +63,11 @@ THUMB_PX = 256
 MAX_NAME_CHARS = 80
 #: the largest run.json / upload.json read, bytes (a damaged or hostile file is not loaded whole)
 MAX_RECORD_BYTES = 4 << 20
+#: the user of a single token (or of no sign-in) and the admin of a token file: sees every run; owns the runs
+#: that record no owner (made before users) and the uploads in ``uploads/``
+SHARED_USER = "admin"
+#: a user name: letters, digits, '.', '_' and '-', starting with a letter or digit (it names a folder)
+USER_RE = re.compile(r"\A[A-Za-z0-9][A-Za-z0-9._-]{0,63}\Z")
 
 _MAGIC = ((b"\x89PNG\r\n\x1a\n", ".png"), (b"\xff\xd8\xff", ".jpg"), (b"\x93NUMPY", ".npy"))
 
@@ -87,6 +99,17 @@ class TooLarge(StudioError):
 def now_iso() -> str:
     """The current UTC time as ``2026-12-02T07:15:00Z``."""
     return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def owner_of(rec: dict[str, Any]) -> str:
+    """The user a run belongs to (a run made before users belongs to the shared user)."""
+    owner = rec.get("owner")
+    return owner if isinstance(owner, str) and owner else SHARED_USER
+
+
+def no_such_run(run_id: str) -> NotFound:
+    """The error of a run that is not there, or is another user's (the same words: it does not say which)."""
+    return NotFound(f"no run {run_id!r} in this workspace (deleted, or from another workspace)")
 
 
 def sanitise_name(name: str | None, default: str = "picture") -> str:
@@ -191,6 +214,25 @@ class Workspace:
         self.runs = self.root / "runs"
         self.uploads.mkdir(exist_ok=True)
         self.runs.mkdir(exist_ok=True)
+        #: whether upload ids are looked up in every user's uploads too (the shared user's view: the admin)
+        self.all_uploads = True
+
+    def for_user(self, user: str) -> Workspace:
+        """This workspace as ``user`` sees its uploads: the shared user's are ``uploads/`` (and it finds
+        every user's), another user's ``users/<user>/uploads/``; runs are shared (their records say whose).
+
+        Raises:
+            ConfigError: a malformed user name (names come from the token file, checked there).
+        """
+        if user == SHARED_USER:
+            return self
+        if not USER_RE.match(user):
+            raise ConfigError(f"user name {user[:40]!r} is not letters, digits, '.', '_' and '-'")
+        view = copy.copy(self)
+        view.uploads = self.root / "users" / user / "uploads"
+        view.uploads.mkdir(parents=True, exist_ok=True)
+        view.all_uploads = False
+        return view
 
     # ------------------------------------------------------------------ paths
 
@@ -208,7 +250,7 @@ class Workspace:
             raise NotFound(f"no run {str(run_id)[:40]!r}: run ids look like 20261202-071500-3fa2")
         d = self.runs / run_id
         if not (d / "run.json").is_file():
-            raise NotFound(f"no run {run_id!r} in this workspace (deleted, or from another workspace)")
+            raise no_such_run(run_id)
         return d
 
     def upload_dir(self, upload_id: str) -> Path:
@@ -220,9 +262,12 @@ class Workspace:
         if not isinstance(upload_id, str) or not UPLOAD_ID_RE.match(upload_id):
             raise NotFound(f"no upload {str(upload_id)[:40]!r}: upload ids are 16 hex digits")
         d = self.uploads / upload_id
-        if not (d / "upload.json").is_file():
-            raise NotFound(f"no upload {upload_id!r} in this workspace; upload the file again")
-        return d
+        if (d / "upload.json").is_file():
+            return d
+        if self.all_uploads:  # the shared user's view finds every user's uploads (the admin resumes their runs)
+            for other in sorted((self.root / "users").glob(f"*/uploads/{upload_id}/upload.json")):
+                return other.parent
+        raise NotFound(f"no upload {upload_id!r} in this workspace; upload the file again")
 
     def upload_record(self, upload_id: str) -> dict[str, Any]:
         """The record (``upload.json``) of an upload."""
@@ -268,8 +313,8 @@ class Workspace:
             write_json(d / "run.json", rec)
             return rec
 
-    def create_run(self, options: dict[str, Any], title: str) -> dict[str, Any]:
-        """A new queued run with ``options`` (the client's, upload ids and all); returns its record."""
+    def create_run(self, options: dict[str, Any], title: str, owner: str = SHARED_USER) -> dict[str, Any]:
+        """A new queued run of ``owner`` with ``options`` (the client's, upload ids and all); returns its record."""
         for _ in range(100):
             run_id = time.strftime("%Y%m%d-%H%M%S", time.gmtime()) + "-" + secrets.token_hex(2)
             d = self.runs / run_id
@@ -278,7 +323,7 @@ class Workspace:
             except FileExistsError:
                 continue
             rec = {
-                "schema": RUN_SCHEMA, "id": run_id, "title": title, "created": now_iso(),
+                "schema": RUN_SCHEMA, "id": run_id, "title": title, "owner": owner, "created": now_iso(),
                 "created_ns": time.time_ns(),  # orders runs made within one second (two tabs)
                 "options": options,
                 "status": "queued", "error": None, "started": None, "finished": None, "exports": {},
@@ -328,7 +373,8 @@ class Workspace:
         Returns:
             (run ids of queued designs, oldest first; (run id, printer) of queued exports).
         """
-        for p in list(self.runs.glob(".deleted-*")) + list((self.uploads / ".incoming").glob("*")):
+        incoming = [*(self.uploads / ".incoming").glob("*"), *self.root.glob("users/*/uploads/.incoming/*")]
+        for p in list(self.runs.glob(".deleted-*")) + incoming:
             shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
         designs: list[str] = []
         exports: list[tuple[str, str]] = []

@@ -2,12 +2,16 @@
 
 Started on a free loopback port with its own workspace; ``stop_studio``
 sends Ctrl-C (the server stops its workers) and kills the process group
-if it does not end.
+if it does not end. With ``sign_in`` the server makes its own token, as
+``saucerfab studio`` does by default, and :func:`printed_url` reads the URL
+with it from the server's output; without, it runs with ``--no-auth``
+(the screenshot script opens the bare page).
 """
 
 from __future__ import annotations
 
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -28,20 +32,22 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def http_get(url: str, timeout: float = 5) -> tuple[int, bytes]:
+def http_get(url: str, timeout: float = 5, headers: dict[str, str] | None = None) -> tuple[int, bytes]:
     try:
-        with urllib.request.urlopen(url, timeout=timeout) as r:
+        with urllib.request.urlopen(urllib.request.Request(url, headers=headers or {}), timeout=timeout) as r:
             return r.status, r.read()
     except urllib.error.HTTPError as exc:
         return exc.code, exc.read()
 
 
-def start_studio(workspace: Path, port: int, log: Path) -> subprocess.Popen[bytes]:
-    """``saucerfab studio`` in a subprocess, once it answers ``GET /api/options``."""
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+def start_studio(workspace: Path, port: int, log: Path, *, sign_in: bool = False) -> subprocess.Popen[bytes]:
+    """``saucerfab studio`` in a subprocess, once it answers ``GET /api/options`` (a 401 counts: it asks for
+    its token)."""
+    env = {k: v for k, v in os.environ.items() if k != "SAUCERFAB_STUDIO_TOKEN"} | {"PYTHONUNBUFFERED": "1"}
+    auth = [] if sign_in else ["--no-auth"]
     with log.open("wb") as out:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "saucerfab", "studio", "--workspace", str(workspace), "--port", str(port)],
+            [sys.executable, "-m", "saucerfab", "studio", "--workspace", str(workspace), "--port", str(port), *auth],
             cwd=ROOT,
             stdout=out,
             stderr=subprocess.STDOUT,
@@ -53,13 +59,21 @@ def start_studio(workspace: Path, port: int, log: Path) -> subprocess.Popen[byte
         if proc.poll() is not None:
             raise AssertionError(f"saucerfab studio exited with {proc.returncode}:\n{_tail(log)}")
         try:
-            if http_get(f"http://127.0.0.1:{port}/api/options", timeout=2)[0] == 200:
+            if http_get(f"http://127.0.0.1:{port}/api/options", timeout=2)[0] in (200, 401):
                 return proc
         except OSError:
             pass
         time.sleep(0.2)
     stop_studio(proc)
     raise AssertionError(f"saucerfab studio did not answer in {STARTUP_S} s:\n{_tail(log)}")
+
+
+def printed_url(log: Path) -> str:
+    """The URL with the token that the server printed at start (``http://127.0.0.1:PORT/?token=...``)."""
+    found = re.search(r"saucerfab studio: (http://\S+\?token=\S+)", log.read_text(errors="replace"))
+    if not found:
+        raise AssertionError(f"the studio printed no URL with a token:\n{_tail(log)}")
+    return found.group(1)
 
 
 def _tail(log: Path) -> str:

@@ -16,6 +16,12 @@ from typing import Any
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[2]
+#: the studio answers to loopback names only (saucerfab/studio/guard.py); the test client's default is 'testserver'
+LOCAL = "http://127.0.0.1:8000"
+#: the token the API tests sign in with (test_studio_auth.py is about signing in; the others sign in and go on)
+TOKEN = "the-studio-tests-token-0123456789"
+#: the header a script signs in with
+AUTH = {"Authorization": f"token {TOKEN}"}
 HEART = REPO / "samples" / "direct_heart.png"
 STAR = REPO / "samples" / "reflected_star.png"
 
@@ -62,6 +68,18 @@ def npy(a: np.ndarray) -> bytes:
     buf = io.BytesIO()
     np.save(buf, a)
     return buf.getvalue()
+
+
+def signed_in(app: Any, token: str = TOKEN, **client_args: Any) -> Any:
+    """A test client of ``app`` signed in as a browser is: the token once in the URL (``?token=``, as the studio
+    prints it), then the session cookie the answer sets. ``client_args`` go to ``TestClient``."""
+    from starlette.testclient import TestClient
+
+    client = TestClient(app, base_url=LOCAL, **client_args)
+    r = client.get(f"/?token={token}", headers={"Accept": "text/html"}, follow_redirects=False)
+    assert r.status_code == 303 and r.headers["location"] == "/", (r.status_code, r.text[:200])
+    assert client.cookies, "signing in set no cookie"
+    return client
 
 
 def upload(client: Any, data: bytes, role: str, name: str) -> dict[str, Any]:

@@ -1,8 +1,10 @@
 """The studio's page in a real, headless Chromium against the real server.
 
 ``python -m saucerfab studio`` is started in a subprocess on a fresh
-workspace and a free port; Debian's Chromium (through Playwright, see
-``tests/browser.py``) loads the page, is refused a bad upload with the
+workspace and a free port, with the token it makes itself; Debian's
+Chromium (through Playwright, see ``tests/browser.py``) is shown the
+sign-in form without it, signs in with the URL the server printed (which
+leaves the address bar without the token), loads the page, is refused a bad upload with the
 server's own message, uploads the bundled sample pictures, runs a tiny
 design (16 x 16 heightfield, 48 px views, 6 iterations a stage) while the
 progress and the first look show, checks the results, the 3D viewer
@@ -11,8 +13,10 @@ for the J55 as 3MF, sees the printability findings and verify rows, and
 downloads the print zip. Then it duplicates the design with a change
 (the form is loaded with its options), cancels the copy, resumes it,
 cancels it again and deletes it, reopens the first design from the history
-and clears the form for a new one. The page must log no console error on
-the way (apart from the one 400 the bad upload is answered with).
+and clears the form for a new one; then it signs out, and in again with the
+token pasted into the sign-in form. The page must log no console error on
+the way (apart from the one 400 the bad upload is answered with, and the
+401 of the sign-in form itself).
 
 Screenshots go to ``out/test-artifacts/studio/`` for a developer to look
 at. Chromium comes from ``.ci/install-tools``; a missing browser fails the
@@ -28,12 +32,13 @@ import urllib.error
 import urllib.request
 import zipfile
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import browser
 import pytest
-from live_studio import free_port, http_get, start_studio, stop_studio
+from live_studio import free_port, http_get, printed_url, start_studio, stop_studio
 
 from saucerfab.pages.labels import STAGE_LABELS
 
@@ -42,8 +47,23 @@ SAMPLES = ROOT / "samples"
 ARTIFACTS = ROOT / "out" / "test-artifacts" / "studio"
 
 
-def _post(url: str, data: bytes) -> tuple[int, dict[str, Any]]:
-    req = urllib.request.Request(url, data=data, method="POST", headers={"Content-Type": "application/octet-stream"})
+@dataclass(frozen=True)
+class Studio:
+    """The server under test: its address, the URL it printed (with its token), and the token."""
+
+    base: str
+    url: str
+    token: str
+
+    @property
+    def auth(self) -> dict[str, str]:
+        """The header a script signs in with."""
+        return {"Authorization": f"token {self.token}"}
+
+
+def _post(url: str, data: bytes, headers: dict[str, str]) -> tuple[int, dict[str, Any]]:
+    req = urllib.request.Request(url, data=data, method="POST",
+                                 headers={"Content-Type": "application/octet-stream", **headers})
     try:
         with urllib.request.urlopen(req, timeout=30) as r:
             return r.status, json.loads(r.read())
@@ -52,13 +72,18 @@ def _post(url: str, data: bytes) -> tuple[int, dict[str, Any]]:
 
 
 @pytest.fixture(scope="module")
-def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Studio]:
     tmp = tmp_path_factory.mktemp("studio")
     port = free_port()
     log = tmp / "server.log"
-    proc = start_studio(tmp / "ws", port, log)
+    proc = start_studio(tmp / "ws", port, log, sign_in=True)
     try:
-        yield f"http://127.0.0.1:{port}"
+        url = printed_url(log)
+        token = url.split("?token=", 1)[1]
+        assert url == f"http://127.0.0.1:{port}/?token={token}" and len(token) >= 32, url
+        yield Studio(f"http://127.0.0.1:{port}", url, token)
+        # the token was printed once (the banner) and never logged since, whatever the requests carried
+        assert log.read_text(errors="replace").count(token) == 1, "the token is in the server's output again"
     finally:
         stop_studio(proc)
         ARTIFACTS.mkdir(parents=True, exist_ok=True)
@@ -97,6 +122,8 @@ def _wait(page: Any, what: str, check: Any, timeout_s: float, errors: list[str])
 
 #: the browser logs a 4xx answer to fetch() as a console error: the bad upload's 400 is expected
 _EXPECTED_400 = re.compile(r"Failed to load resource: the server responded with a status of 400")
+#: ... and the sign-in form's own answer, a 401
+_EXPECTED_401 = re.compile(r"Failed to load resource: the server responded with a status of 401")
 
 
 #: the optimizer's keys as they would read if the page showed them raw ("bw_sigma_large", "bw sigma large",
@@ -113,11 +140,27 @@ def _allowed(error: str) -> bool:
     return "net::ERR_ABORTED" in error and error.startswith("request failed")
 
 
-def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, tmp_path: Path) -> None:
+def _sign_in_form_shown(page: Any, errors: list[str]) -> None:
+    """The page is the sign-in form (no studio, nothing of its API); the 401 it came with is no error, nor the
+    requests of the page it replaced, aborted as it left."""
+    page.locator("form[action='/login'] input[name='token']").wait_for(state="visible", timeout=10_000)
+    assert page.locator("#design-form").count() == 0 and "Sign in" in page.inner_text("body")
+    assert all(_EXPECTED_401.search(e) or _allowed(e) for e in errors), errors
+    errors.clear()
+
+
+def test_studio_page_designs_exports_and_downloads(studio: Studio, chromium: None, tmp_path: Path) -> None:
     t_start = time.monotonic()
     with browser.live_page((1280, 900), accept_downloads=True) as (page, errors):
-        page.goto(studio + "/", wait_until="load")
+        # ---- without the token: the sign-in form; with the printed URL: the studio, and no token in the address ----
+        page.goto(studio.base + "/", wait_until="load")
+        _sign_in_form_shown(page, errors)
+        _shot(page, "00-sign-in")
+        page.goto(studio.url, wait_until="load")
         page.wait_for_selector("body[data-ready='true']", timeout=20_000)
+        assert page.url == studio.base + "/", page.url  # the redirect took the token out of the address
+        assert studio.token not in page.evaluate("() => document.cookie + location.href")  # an HttpOnly cookie
+        assert page.locator("#who").inner_text() == "admin" and page.locator("#sign-out button").is_visible()
         assert page.locator("#printer option").count() >= 1
         unlabelled = page.evaluate(
             "() => [...document.querySelectorAll('input, select, textarea')]"
@@ -129,7 +172,7 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         # ---- a text file called .png: the server's message in the page, no traceback ----
         bad = tmp_path / "notes.png"
         bad.write_text("these are my notes, not a picture\n", encoding="utf-8")
-        status, body = _post(f"{studio}/api/uploads?role=direct&name=notes.png", bad.read_bytes())
+        status, body = _post(f"{studio.base}/api/uploads?role=direct&name=notes.png", bad.read_bytes(), studio.auth)
         assert status == 400 and body.get("error"), (status, body)
         n_before = len(errors)
         page.set_input_files("#file-direct", str(bad))
@@ -261,7 +304,7 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         page.click("#start")
         _wait(page, "the copy", lambda: _shown_run(page) != first_id, 20, errors)
         copy_id = _shown_run(page)
-        status, body = http_get(f"{studio}/api/runs/{copy_id}")
+        status, body = http_get(f"{studio.base}/api/runs/{copy_id}", headers=studio.auth)
         record = json.loads(body)
         assert record["options"]["shape"] == "bowl" and record["options"]["resolution"] == 16, record["options"]
         assert record["options"]["method"] == "paper", record["options"]
@@ -281,7 +324,8 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
         page.click("#run-delete")
         _wait(page, "the copy to be deleted", lambda: page.locator("#history li").count() == 1, 20, errors)
         assert page.locator("#run").is_hidden()
-        assert http_get(f"{studio}/api/runs/{copy_id}")[0] == 404
+        assert http_get(f"{studio.base}/api/runs/{copy_id}", headers=studio.auth)[0] == 404
+        assert http_get(f"{studio.base}/api/runs/{first_id}")[0] == 401  # and nothing without the token
 
         # ---- reopen the first design from the history; then a new, empty design ----
         page.click("#history li button")
@@ -294,10 +338,27 @@ def test_studio_page_designs_exports_and_downloads(studio: str, chromium: None, 
 
         hard = [e for e in errors if not _allowed(e)]
         assert not hard, hard
+
+        # ---- sign out: the sign-in form again; the token pasted into it: the studio and its designs again ----
+        page.click("#sign-out button")
+        _sign_in_form_shown(page, errors)
+        page.fill("input[name='token']", "not-the-token-of-this-studio")
+        page.click("#sign-in")
+        page.locator("p.error").wait_for(state="visible", timeout=10_000)
+        assert "That is not this studio's token" in page.locator("p.error").inner_text()
+        _shot(page, "06-wrong-token")
+        _sign_in_form_shown(page, errors)
+        page.fill("input[name='token']", studio.token)
+        page.click("#sign-in")
+        page.wait_for_selector("body[data-ready='true']", timeout=20_000)
+        _wait(page, "the history after signing in again", lambda: page.locator("#history li").count() == 1, 10, errors)
+        assert page.url == studio.base + "/", page.url
+        hard = [e for e in errors if not _allowed(e)]
+        assert not hard, hard
     assert time.monotonic() - t_start < 150
 
 
-def test_progress_reads_in_peoples_words_once_the_first_look_is_in(studio: str, chromium: None) -> None:
+def test_progress_reads_in_peoples_words_once_the_first_look_is_in(studio: Studio, chromium: None) -> None:
     """The progress line and energies for a given progress.json, through the page's own RunView.
 
     A design's first look and its first stage report come a moment apart; here the progress
@@ -305,7 +366,7 @@ def test_progress_reads_in_peoples_words_once_the_first_look_is_in(studio: str, 
     caught in between.
     """
     with browser.live_page((1000, 700)) as (page, errors):
-        page.goto(studio + "/", wait_until="load")
+        page.goto(studio.url, wait_until="load")  # signs in
         page.wait_for_selector("body[data-ready='true']", timeout=20_000)
         shown = page.evaluate("""async () => {
             const { RunView } = await import("/static/run.js");  // the page's module: its labels are set
@@ -332,4 +393,22 @@ def test_progress_reads_in_peoples_words_once_the_first_look_is_in(studio: str, 
         assert "image error369,700" in values and "shape change0.01234" in values, values
         assert "barrier" not in values and "objective" not in values, values  # the barrier's logs mean nothing
         assert not RAW_KEY.findall(line + values), shown
+        assert not [e for e in errors if not _allowed(e)], errors
+
+
+def test_the_admins_history_names_other_users_designs(studio: Studio, chromium: None) -> None:
+    """The admin's list holds everyone's designs: the page's own history marks each of another user's with
+    its owner (and none of the admin's own)."""
+    with browser.live_page((1000, 700)) as (page, errors):
+        page.goto(studio.url, wait_until="load")
+        page.wait_for_selector("body[data-ready='true']", timeout=20_000)
+        shown = page.evaluate("""async () => {
+            const { renderHistory } = await import("/static/history.js");
+            const run = (id, owner) => ({ id, owner, title: `design ${id}`, status: "done", created: null });
+            renderHistory([run("a", "alice"), run("b", "admin")], null, () => {}, "admin");
+            return [...document.querySelectorAll("#history li")].map((li) => [
+                li.querySelector(".history-owner").textContent,
+                li.querySelector("button").getAttribute("aria-label")]);
+        }""")
+        assert shown == [[" · alice", "Open design design a (done, alice's)"], ["", "Open design design b (done)"]], shown
         assert not [e for e in errors if not _allowed(e)], errors

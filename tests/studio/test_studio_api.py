@@ -1,9 +1,12 @@
 """The studio's HTTP API in-process (starlette.testclient): uploads, runs, events, cancel, resume, exports.
 
-Tests that need no worker use a TestClient outside its ``with`` block: the
-app's lifespan (the job queue) does not start, so runs stay queued. The
-others start real worker processes (spawn); each imports torch, so they are
-few and their designs tiny (studio_helpers.TINY).
+Every client signs in first (studio_helpers.signed_in: the token once in the
+URL, then the session cookie), as the studio asks of everyone; signing in
+itself and the users' isolation are test_studio_auth.py's. Tests that need
+no worker use a TestClient outside its ``with`` block: the app's lifespan
+(the job queue) does not start, so runs stay queued. The others start real
+worker processes (spawn); each imports torch, so they are few and their
+designs tiny (studio_helpers.TINY).
 """
 
 from __future__ import annotations
@@ -18,14 +21,17 @@ import numpy as np
 import pytest
 from starlette.testclient import TestClient
 from studio_helpers import (
+    AUTH,
     HEART,
     LONG,
     STAR,
     TINY,
+    TOKEN,
     bomb_png,
     npy,
     pair,
     png,
+    signed_in,
     sse_events,
     subject_png,
     upload,
@@ -34,20 +40,23 @@ from studio_helpers import (
 )
 
 from saucerfab.studio.app import STATIC, create_app
+from saucerfab.studio.auth import Auth
 
-#: the studio answers to loopback names only (saucerfab/studio/guard.py); the test client's default is 'testserver'
-LOCAL = "http://127.0.0.1:8000"
+
+def studio_app(ws: Path, **kw):  # type: ignore[no-untyped-def]
+    """The studio's app over ``ws`` with the tests' token (one shared user)."""
+    return create_app(ws, auth=Auth.shared(TOKEN), **kw)
 
 
 @pytest.fixture
 def app(tmp_path: Path):  # type: ignore[no-untyped-def]
-    return create_app(tmp_path / "ws", grace_s=15)
+    return studio_app(tmp_path / "ws", grace_s=15)
 
 
 @pytest.fixture
 def idle(app) -> TestClient:  # type: ignore[no-untyped-def]
-    """A client with no job queue running (no lifespan): runs stay queued."""
-    return TestClient(app, base_url=LOCAL)
+    """A signed-in client with no job queue running (no lifespan): runs stay queued."""
+    return signed_in(app)
 
 
 # --------------------------------------------------------------------------- no workers
@@ -99,7 +108,7 @@ def test_an_exports_check_summary_counts_the_findings(tmp_path: Path) -> None:
 
 
 def test_bad_uploads_are_4xx_with_a_message(tmp_path: Path) -> None:
-    client = TestClient(create_app(tmp_path / "ws", max_upload_bytes=100_000), base_url=LOCAL)
+    client = signed_in(studio_app(tmp_path / "ws", max_upload_bytes=100_000))
     cases = [
         ("direct", b"plain text, not a picture", 400, "not a PNG, JPEG or WebP"),
         ("direct", bomb_png(), 400, "64,000,000 pixels"),
@@ -216,7 +225,7 @@ def test_cancel_queued_duplicate_delete(idle: TestClient) -> None:
     assert idle.post(f"/api/runs/{rid}/duplicate", json={"shape": "nope"}).status_code == 400
     assert [x["id"] for x in idle.get("/api/runs").json()] == [d["id"], rid]
     listed = idle.get("/api/runs").json()[1]
-    assert set(listed) == {"id", "title", "status", "created", "thumb_url", "error"}
+    assert set(listed) == {"id", "title", "status", "created", "thumb_url", "error", "owner"}  # owner: the admin's list
     assert idle.get(listed["thumb_url"]).status_code == 200
     assert idle.delete(f"/api/runs/{rid}").status_code == 200
     assert idle.get(f"/api/runs/{rid}").status_code == 404
@@ -250,8 +259,8 @@ def test_event_stream_of_a_run_deleted_meanwhile(idle: TestClient) -> None:
 
 
 def test_internal_error_is_a_500_without_traceback(tmp_path: Path) -> None:
-    app = create_app(tmp_path / "ws")
-    client = TestClient(app, base_url=LOCAL, raise_server_exceptions=False)
+    app = studio_app(tmp_path / "ws")
+    client = signed_in(app, raise_server_exceptions=False)
     app.state.workspace.list_runs = lambda: 1 / 0  # a fault of the server itself
     r = client.get("/api/runs")
     assert r.status_code == 500 and r.json()["error"].startswith("internal error")
@@ -263,7 +272,7 @@ def test_internal_error_is_a_500_without_traceback(tmp_path: Path) -> None:
 
 def test_design_verify_export_download(app) -> None:  # type: ignore[no-untyped-def]
     """Start -> events -> done with results, the 3D viewer, an export with its findings, the zip."""
-    with TestClient(app, base_url=LOCAL) as client:
+    with signed_in(app) as client:
         run = client.post("/api/runs", json={**pair(client), **TINY, "verify": True}).json()
         rid = run["id"]
         with client.stream("GET", f"/api/runs/{rid}/events") as s:
@@ -319,7 +328,7 @@ def _wait_export(client: TestClient, rid: str, printer: str, timeout_s: float = 
 
 
 def test_cancel_then_resume_from_the_checkpoint(app) -> None:  # type: ignore[no-untyped-def]
-    with TestClient(app, base_url=LOCAL) as client:
+    with signed_in(app) as client:
         rid = client.post("/api/runs", json={**pair(client), **LONG}).json()["id"]
         wait_in_stage(client, rid)
         r = client.post(f"/api/runs/{rid}/cancel")
@@ -338,9 +347,9 @@ def test_cancel_then_resume_from_the_checkpoint(app) -> None:  # type: ignore[no
 
 def test_two_tabs_at_once(tmp_path: Path) -> None:
     """Two clients upload and start designs at the same time (two workers at once): two intact design folders."""
-    app = create_app(tmp_path / "ws", jobs=2)
-    with TestClient(app, base_url=LOCAL) as tab1:
-        tab2 = TestClient(app, base_url=LOCAL)  # the same server (one job queue), another connection
+    app = studio_app(tmp_path / "ws", jobs=2)
+    with signed_in(app) as tab1:
+        tab2 = signed_in(app)  # the same server (one job queue), another connection
         made: dict[str, tuple[str, dict]] = {}
 
         def work(tab: TestClient, name: str, seed: int) -> None:
@@ -370,16 +379,16 @@ def test_restart_with_a_design_half_done(tmp_path: Path) -> None:
     import signal
 
     ws_dir = tmp_path / "ws"
-    app = create_app(ws_dir)
-    with TestClient(app, base_url=LOCAL) as client:
+    app = studio_app(ws_dir)
+    with signed_in(app) as client:
         rid = client.post("/api/runs", json={**pair(client), **LONG}).json()["id"]
         wait_in_stage(client, rid)
         pid = app.state.queue.running()[rid]
         app.state.queue.abandon()  # the server is gone, as in a crash ...
         os.kill(pid, signal.SIGKILL)  # ... and its worker with it
     assert json.loads((ws_dir / "runs" / rid / "run.json").read_text())["status"] == "running"
-    again = create_app(ws_dir)
-    with TestClient(again, base_url=LOCAL) as client:
+    again = studio_app(ws_dir)
+    with signed_in(again) as client:
         run = client.get(f"/api/runs/{rid}").json()
         assert run["status"] == "interrupted" and "resume" in run["error"]
         assert client.post(f"/api/runs/{rid}/resume").status_code == 200
@@ -391,7 +400,7 @@ def test_client_leaving_the_event_stream_mid_run(tmp_path: Path) -> None:
     import httpx2 as httpx  # starlette.testclient's client (the dev extra); a real HTTP client here
     import uvicorn
 
-    app = create_app(tmp_path / "ws")
+    app = studio_app(tmp_path / "ws")
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning", lifespan="on"))
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
@@ -402,7 +411,7 @@ def test_client_leaving_the_event_stream_mid_run(tmp_path: Path) -> None:
     port = server.servers[0].sockets[0].getsockname()[1]
     base = f"http://127.0.0.1:{port}"
     try:
-        with httpx.Client(base_url=base, timeout=30) as client:
+        with httpx.Client(base_url=base, timeout=30, headers=AUTH) as client:  # a script signs in with the header
             ids = {"direct": upload(client, HEART.read_bytes(), "direct", "h.png")["id"],
                    "reflected": upload(client, STAR.read_bytes(), "reflected", "s.png")["id"]}
             rid = client.post("/api/runs", json={**ids, **TINY}).json()["id"]
@@ -420,7 +429,7 @@ def test_client_leaving_the_event_stream_mid_run(tmp_path: Path) -> None:
         for raw in (f"/api/runs/{rid}/files/../run.json", f"/api/runs/{rid}/files/design/../../../studio.json",
                     "/api/runs/../../etc/passwd", "/static/../studio/app.py"):
             conn = http.client.HTTPConnection("127.0.0.1", port, timeout=10)
-            conn.request("GET", raw)
+            conn.request("GET", raw, headers=AUTH)
             resp = conn.getresponse()
             assert resp.status == 404 and b"schema" not in resp.read(), raw
             conn.close()

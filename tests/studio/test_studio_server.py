@@ -17,7 +17,8 @@ def test_help_lists_the_options(capsys: pytest.CaptureFixture[str]) -> None:
         main(["studio", "--help"])
     assert info.value.code == 0
     out = capsys.readouterr().out
-    for opt in ("--port", "--host", "--workspace", "--open", "--jobs", "--max-upload-mb", "no authentication"):
+    for opt in ("--port", "--host", "--workspace", "--open", "--jobs", "--max-upload-mb", "--token", "--token-file",
+                "--no-auth", "no authentication"):
         assert opt in out
 
 
@@ -51,9 +52,10 @@ def test_banner_and_the_network_warning(tmp_path: Path, capsys: pytest.CaptureFi
                                         monkeypatch: pytest.MonkeyPatch) -> None:
     import uvicorn
 
+    monkeypatch.delenv("SAUCERFAB_STUDIO_TOKEN", raising=False)  # a token of the shell running the tests
     served = []
     monkeypatch.setattr(uvicorn.Server, "run", lambda self: served.append(self.config.host))  # no real serving
-    main(["studio", "--workspace", str(tmp_path / "ws"), "--host", "0.0.0.0", "--port", "0"])
+    main(["studio", "--workspace", str(tmp_path / "ws"), "--host", "0.0.0.0", "--port", "0", "--no-auth"])
     out, err = capsys.readouterr()
     assert served == ["0.0.0.0"] and str(tmp_path / "ws") in out and "http://" in out
     assert "anyone on the network" in err and "no authentication" in err

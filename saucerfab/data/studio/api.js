@@ -22,6 +22,11 @@ async function parse(response) {
       body = null;
     }
   }
+  if (response.status === 401) {
+    // signed out (the cookie expired, the token changed, or sign-out in another tab): the page itself
+    // answers with the sign-in form now
+    window.location.reload();
+  }
   if (!response.ok) {
     const message = body && typeof body.error === "string" ? body.error : `the server answered ${response.status} ${response.statusText}`;
     throw new ApiError(message, response.status);

@@ -1,11 +1,12 @@
-// The workspace's designs (GET /api/runs, newest first) as a list of cards
-// with thumbnails and status; a card opens its design in the main area.
+// The workspace's designs (GET /api/runs, newest first: the signed-in user's, or everyone's for the
+// admin) as a list of cards with thumbnails and status; a card opens its design in the main area.
 
 import { statusBadge } from "./run.js";
 
 const $ = (sel, root = document) => root.querySelector(sel);
 
-export function renderHistory(runs, selectedId, onOpen) {
+/** `me`: the signed-in user; another user's design (the admin sees them all) is marked with its owner. */
+export function renderHistory(runs, selectedId, onOpen, me) {
   const list = $("#history");
   $("#history-empty").hidden = runs.length > 0;
   const keep = new Map([...list.children].map((li) => [li.dataset.id, li]));
@@ -28,18 +29,23 @@ export function renderHistory(runs, selectedId, onOpen) {
       const badge = document.createElement("span");
       const when = document.createElement("span");
       when.className = "when";
-      meta.append(badge, when);
+      const owner = document.createElement("span");
+      owner.className = "history-owner";
+      meta.append(badge, when, owner);
       text.append(title, meta);
       button.append(thumb, text);
       button.addEventListener("click", () => onOpen(li.dataset.id));
       li.append(button);
     }
     const button = li.firstElementChild;
-    button.setAttribute("aria-label", `Open design ${run.title || run.id} (${run.status})`);
+    const by = run.owner && me && run.owner !== me ? `, ${run.owner}'s` : "";
+    button.setAttribute("aria-label", `Open design ${run.title || run.id} (${run.status}${by})`);
     button.classList.toggle("selected", run.id === selectedId);
     li.querySelector(".history-title").textContent = run.title || run.id;
     statusBadge(li.querySelector(".history-meta span"), run.status);
     li.querySelector(".when").textContent = run.created ? new Date(run.created).toLocaleString([], { dateStyle: "short", timeStyle: "short" }) : "";
+    const other = run.owner && me && run.owner !== me;
+    li.querySelector(".history-owner").textContent = other ? ` · ${run.owner}` : "";
     li.title = run.error ?? "";
     const thumb = li.querySelector(".thumb");
     if (run.thumb_url) {

@@ -15,6 +15,7 @@ const $ = (sel, root = document) => root.querySelector(sel);
 
 const state = {
   options: null,
+  session: null, // who is signed in: {auth, user, admin} (GET /api/session)
   form: null,
   view: new RunView(),
   selected: null, // the id of the run shown in the main area
@@ -96,7 +97,7 @@ function closeRun() {
   state.view.clear();
   $("#welcome").hidden = false;
   history.replaceState(null, "", location.pathname);
-  renderHistory(lastRuns, null, openRun);
+  renderHistory(lastRuns, null, openRun, state.session?.user);
 }
 
 function showRecord(record) {
@@ -246,7 +247,7 @@ async function refreshHistory() {
   } catch (err) {
     $("#server-state").textContent = err.message;
   }
-  renderHistory(runs, state.selected, openRun);
+  renderHistory(runs, state.selected, openRun, state.session?.user);
   // queued designs start without the page doing anything: look again while any wait or run
   const busy = runs.some((r) => !FINAL.has(r.status));
   state.historyTimer = setTimeout(refreshHistory, busy ? 2000 : 10000);
@@ -280,9 +281,19 @@ function fillExportControls(options) {
   );
 }
 
+/** Who is signed in, and the sign-out button (none without sign-in). */
+function showSession(session) {
+  state.session = session;
+  $("#sign-out").hidden = !session.auth;
+  $("#who").textContent = session.user ?? "";
+  $("#h-history").textContent = session.auth && !session.admin ? "Your designs" : "Designs in this workspace";
+}
+
 async function main() {
   try {
-    state.options = await getJSON("/api/options");
+    const [options, session] = await Promise.all([getJSON("/api/options"), getJSON("/api/session")]);
+    state.options = options;
+    showSession(session);
   } catch (err) {
     $("#server-state").textContent = `The studio server did not answer: ${err.message}`;
     return;
