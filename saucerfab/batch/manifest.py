@@ -429,7 +429,7 @@ def _check_design_options(
         check_height_scale(request.height_scale)
     except SaucerfabError as exc:
         raise ConfigError(f"design_options: {exc}") from None
-    scene, cup = (scene, cup) if scene is not None else ("paper", None)
+    scene, cup = (scene, cup) if scene is not None else (DesignRequest.default("scene"), None)
     try:
         key = json.dumps(options, sort_keys=True)
     except (TypeError, ValueError):  # a value JSON cannot hold (a TOML date): check it uncached

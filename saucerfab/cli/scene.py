@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-HELP = "validate a scene TOML (or print the paper preset) as TOML"
+HELP = "validate a scene TOML (or print a preset, the default one unless named) as TOML"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("source", nargs="?", default="paper", help="scene TOML file or preset (default: paper)")
+    from saucerfab.model.scene import DEFAULT_PRESET, PRESETS
+
+    p.add_argument("source", nargs="?", default=DEFAULT_PRESET,
+                   help=f"scene TOML file or preset: {', '.join(PRESETS)} (default: {DEFAULT_PRESET})")
     p.add_argument("-o", "--out", help="write the TOML here instead of printing it")
     p.add_argument("--force", action="store_true", help="replace an existing --out file")
     p.add_argument("--json", action="store_true", help="print the validated scene as JSON instead of TOML")

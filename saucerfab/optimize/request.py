@@ -23,7 +23,7 @@ from saucerfab.imaging.fitting import FITS
 from saucerfab.model.eyes import DEFAULT_IPD_MM, EYES_USAGE, OLD_DESIGN_EYE_NAME, EyeSpec, parse_eyes
 from saucerfab.model.heightfield import HEIGHT_SCALE
 from saucerfab.model.profiles import DEFAULT_PRINTER
-from saucerfab.model.scene import VIEW_NAMES
+from saucerfab.model.scene import DEFAULT_PRESET, VIEW_NAMES
 from saucerfab.optimize.energies import WEIGHTS
 from saucerfab.optimize.stages import ABLATION_STAGES, METHODS, check_weights, stage_cap, stages_for, stall_window
 
@@ -68,7 +68,8 @@ class DesignRequest(_Weights):
         direct: image seen directly on the saucer (PNG/JPEG/WebP).
         reflected: image seen in the mirror cup.
         shape: base shape: a built-in name (``saucerfab shapes``) or a .png/.npy file.
-        scene: a preset name ("paper") or a scene TOML path.
+        scene: a preset name (``saucerfab.model.scene.PRESETS``: "paper", the default, or "wide")
+            or a scene TOML path.
         reflected2: second reflected image (prism cups, two-reflection mode).
         cup: optional cup spec overriding the scene's (``circle:R``, ``prism:6``...).
         resolution: heightfield vertices per side (None: the scene's, 150).
@@ -170,7 +171,7 @@ class DesignRequest(_Weights):
     direct: Path
     reflected: Path
     shape: str = "waves"
-    scene: str = "paper"
+    scene: str = DEFAULT_PRESET
     reflected2: Path | None = None
     cup: str | None = None
     resolution: int | None = None
