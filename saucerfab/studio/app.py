@@ -43,13 +43,15 @@ from saucerfab.pages.labels import api_labels
 from saucerfab.studio import options as opts
 from saucerfab.studio.auth import USER_KEY, Auth, SignIn, User, login_routes, session_cookie_name
 from saucerfab.studio.guard import LOOPBACK_NAMES, HostOriginGuard
-from saucerfab.studio.jobs import DEFAULT_JOBS, Job, JobQueue
+from saucerfab.studio.jobs import DEFAULT_JOBS, DEFAULT_MAX_QUEUED_PER_USER, Job, JobQueue
 from saucerfab.studio.results import SERVED_SUFFIXES, design_results, export_details, thumb_url, viewer_page
 from saucerfab.studio.workspace import (
     FINAL,
     MAX_UPLOAD_BYTES,
+    MAX_USER_UPLOAD_BYTES,
     ROLES,
     RUN_ID_RE,
+    SHARED_USER,
     Conflict,
     NotFound,
     StudioError,
@@ -119,6 +121,9 @@ def create_app(
     grace_s: float | None = None,
     allowed_hosts: Sequence[str] | None = LOOPBACK_NAMES,
     auth: Auth | None = None,
+    max_queued_per_user: int = DEFAULT_MAX_QUEUED_PER_USER,
+    max_user_upload_bytes: int = MAX_USER_UPLOAD_BYTES,
+    cluster: Any = None,
 ) -> Starlette:
     """The studio app over ``workspace`` (made a workspace if new or empty).
 
@@ -135,15 +140,25 @@ def create_app(
             (:mod:`saucerfab.studio.guard`).
         auth: the users and their tokens (:mod:`saucerfab.studio.auth`); None:
             no sign-in, every request is the shared user's (``--no-auth``).
+        max_queued_per_user: designs one user may have waiting when the studio has several users (0: no
+            limit; more is 429); a studio with one user (one token, ``--no-auth``) has no limit.
+        max_user_upload_bytes: bytes of uploads one user may keep (more is 413).
+        cluster: a connected :class:`saucerfab.studio.cluster.DaskCluster` the jobs run on
+            (``--scheduler``); None: worker processes on this machine.
     """
     from saucerfab.imaging.images import DEFAULT_MAX_PIXELS
 
     ws = Workspace(workspace)
-    queue = JobQueue(ws, jobs=jobs) if grace_s is None else JobQueue(ws, jobs=jobs, grace_s=grace_s)
+    auth = Auth(None, "--no-auth") if auth is None else auth
+    # the share of the queue is a team's rule: a lone designer (one token, --no-auth) queues as before
+    team = auth.tokens is not None and len(auth.tokens) > 1
+    queue = JobQueue(ws, jobs=jobs, max_queued=max_queued_per_user if team else 0, cluster=cluster,
+                     **({} if grace_s is None else {"grace_s": grace_s}))
+    # one user's check of their share of the queue and the queuing it allows happen together (two tabs)
+    queuing = anyio.Lock()
     pixels = DEFAULT_MAX_PIXELS if max_pixels is None else int(max_pixels)
     samples = sample_files()
     choices: dict[str, Any] = {}
-    auth = Auth(None, "--no-auth") if auth is None else auth
     cookie = session_cookie_name(ws.root)
 
     # ------------------------------------------------------------------ who asks
@@ -193,7 +208,8 @@ def create_app(
             **choices,
             # people's words for the stage, energy and stop-reason keys the progress and results carry
             "labels": api_labels(),
-            "limits": {"max_upload_bytes": max_upload_bytes, "max_pixels": pixels},
+            "limits": {"max_upload_bytes": max_upload_bytes, "max_pixels": pixels,
+                       "max_user_upload_bytes": max_user_upload_bytes, "max_queued_per_user": max_queued_per_user},
             "samples": [{"name": n, "role": role, "url": f"/api/samples/{n}"} for n, (_, role) in samples.items()],
         })
 
@@ -207,6 +223,9 @@ def create_app(
         if declared.isdigit() and int(declared) > max_upload_bytes:
             raise TooLarge(_too_large(int(declared)))
         mine = _uploads(request)
+        used = await run_in_threadpool(mine.upload_bytes)
+        if declared.isdigit():
+            _check_share(used, int(declared))
         fd, tmp = mine.incoming()
         try:
             size = 0
@@ -215,6 +234,7 @@ def create_app(
                     size += len(chunk)
                     if size > max_upload_bytes:
                         raise TooLarge(_too_large(size, more=True))
+                    _check_share(used, size)
                     fh.write(chunk)
             if size == 0:
                 raise StudioError("the upload is empty: send the file's bytes as the request body (not a form)")
@@ -227,6 +247,14 @@ def create_app(
     def _too_large(size: int, more: bool = False) -> str:
         return (f"the file is {'over ' if more else ''}{size:,} bytes; the studio takes uploads up to "
                 f"{max_upload_bytes:,} bytes. Downscale or re-compress it (a view frame is a few hundred pixels)")
+
+    def _check_share(used: int, size: int) -> None:
+        """A user's uploads together stay within ``max_user_upload_bytes`` (413 otherwise)."""
+        if used + size > max_user_upload_bytes:
+            raise TooLarge(f"your uploads take {used:,} bytes and this file would bring them over "
+                           f"{max_user_upload_bytes:,} bytes, the most one designer may keep (--max-user-upload-mb "
+                           f"{max_user_upload_bytes / 2**20:g}); choose among the pictures you uploaded before, or "
+                           "ask whoever runs the studio to raise --max-user-upload-mb")
 
     def _upload_doc(rec: dict[str, Any]) -> dict[str, Any]:
         return {**rec, "thumb_url": f"/api/uploads/{rec['id']}/thumb.png",
@@ -245,6 +273,7 @@ def create_app(
         src, role = samples[name]
         role = request.query_params.get("role", role)
         mine = _uploads(request)
+        _check_share(await run_in_threadpool(mine.upload_bytes), src.stat().st_size)
 
         def copy() -> dict[str, Any]:
             fd, tmp = mine.incoming()
@@ -293,6 +322,7 @@ def create_app(
         rec["progress"] = progress
         rec["thumb_url"] = thumb_url(run_id, d, rec)
         rec["results"] = design_results(run_id, d) if rec.get("status") == "done" else None
+        rec["queue"] = queue.position(Job("design", run_id)) if rec.get("status") == "queued" else None
         return rec
 
     async def create_run(request: Request) -> Response:
@@ -300,13 +330,19 @@ def create_app(
         mine = _uploads(request)
         options, title = await run_in_threadpool(opts.check_options, mine, body)
         await run_in_threadpool(opts.validate_run, mine, options)
-        rec = await run_in_threadpool(ws.create_run, options, title, _me(request).name)
-        _submit(Job("design", rec["id"]))
-        return _json_response(await run_in_threadpool(_full, rec["id"]), 201)
+        return _json_response(await _queue_new(options, title, _me(request).name), 201)
 
-    def _submit(job: Job) -> None:
+    async def _queue_new(options: dict[str, Any], title: str, user: str) -> dict[str, Any]:
+        """A new run of ``user``, queued when their share of the queue has room (else 429, and no run)."""
+        async with queuing:
+            queue.check_room(user)
+            rec = await run_in_threadpool(ws.create_run, options, title, user)
+            _submit(Job("design", rec["id"]), user)
+        return await run_in_threadpool(_full, rec["id"])
+
+    def _submit(job: Job, user: str) -> None:
         try:
-            queue.submit(job)
+            queue.submit(job, user)
         except RuntimeError as exc:  # shutting down: it stays queued and starts at the next start
             log.warning("%s", exc)
 
@@ -346,8 +382,11 @@ def create_app(
                 raise Conflict(f"run {run_id} is {status}; only a cancelled, interrupted or failed design resumes")
             rec.update(status="queued", error=None, finished=None, notes=[])
 
-        await run_in_threadpool(ws.update_run, run_id, change)
-        _submit(Job("design", run_id))
+        async with queuing:  # the run's owner's share of the queue (the admin may resume another's run)
+            owner = owner_of(await run_in_threadpool(ws.read_run, run_id))
+            queue.check_room(owner)
+            await run_in_threadpool(ws.update_run, run_id, change)
+            _submit(Job("design", run_id), owner)
         return _json_response(await run_in_threadpool(_full, run_id))
 
     async def duplicate(request: Request) -> Response:
@@ -360,9 +399,7 @@ def create_app(
         mine = _uploads(request)  # the admin's view finds the uploads of the run it copies, whoever's they are
         options, title = await run_in_threadpool(opts.check_options, mine, merged)
         await run_in_threadpool(opts.validate_run, mine, options)
-        rec = await run_in_threadpool(ws.create_run, options, title, _me(request).name)
-        _submit(Job("design", rec["id"]))
-        return _json_response(await run_in_threadpool(_full, rec["id"]), 201)
+        return _json_response(await _queue_new(options, title, _me(request).name), 201)
 
     async def delete_run(request: Request) -> Response:
         run_id = await _run(request)
@@ -372,7 +409,8 @@ def create_app(
     async def events(request: Request) -> Response:
         run_id = await _run(request)
         d = ws.run_dir(run_id)
-        return StreamingResponse(_event_stream(ws, run_id, d), media_type="text/event-stream",
+        where = lambda: queue.position(Job("design", run_id))  # noqa: E731
+        return StreamingResponse(_event_stream(ws, run_id, d, where), media_type="text/event-stream",
                                  headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
 
     async def run_file(request: Request) -> Response:
@@ -424,8 +462,8 @@ def create_app(
                 raise Conflict(f"run {run_id} is already exporting for {printer}; wait until it is done")
             rec["exports"][printer] = dict(entry)
 
-        await run_in_threadpool(ws.update_run, run_id, change)
-        _submit(Job("export", run_id, printer))
+        rec = await run_in_threadpool(ws.update_run, run_id, change)
+        _submit(Job("export", run_id, printer), owner_of(rec))
         return _json_response(export_details(run_id, ws.run_dir(run_id), printer, entry), 202)
 
     def _export_entry(run_id: str, printer: str) -> dict[str, Any]:
@@ -473,11 +511,12 @@ def create_app(
     @asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
         designs, exports = await run_in_threadpool(ws.startup_scan)
+        owners = {r["id"]: owner_of(r) for r in await run_in_threadpool(ws.list_runs)}
         queue.start()
-        for run_id in designs:
-            _submit(Job("design", run_id))
+        for run_id in designs:  # queued again, past the limit of a user's share: they were taken before
+            _submit(Job("design", run_id), owners.get(run_id, SHARED_USER))
         for run_id, printer in exports:
-            _submit(Job("export", run_id, printer))
+            _submit(Job("export", run_id, printer), owners.get(run_id, SHARED_USER))
         try:
             yield
         finally:
@@ -563,15 +602,17 @@ def _event(kind: str, doc: Any) -> bytes:
     return f"event: {kind}\ndata: {json.dumps(doc, default=str)}\n\n".encode()
 
 
-async def _event_stream(ws: Workspace, run_id: str, folder: Path) -> AsyncIterator[bytes]:
+async def _event_stream(ws: Workspace, run_id: str, folder: Path,
+                        where: Any = lambda: None) -> AsyncIterator[bytes]:
     """Server-Sent Events of one run: ``progress`` when progress.json changes, ``status`` when the record's
-    status (or error) changes; ends after a final status.
+    status (or error) changes, or its place in the queue (``where()``, the record's ``queue``); ends after a
+    final status.
 
     A client that goes away cancels this generator at its next ``yield`` or
     sleep: nothing else is held, so there is nothing to clean up.
     """
     last_progress: bytes | None = None
-    last_state: tuple[Any, Any] | None = None
+    last_state: tuple[Any, Any, str] | None = None
     beat = time.monotonic()
     while True:
         try:
@@ -579,7 +620,8 @@ async def _event_stream(ws: Workspace, run_id: str, folder: Path) -> AsyncIterat
         except NotFound:
             yield _event("status", {"id": run_id, "status": "deleted", "error": "the run was deleted"})
             return
-        state = (rec.get("status"), rec.get("error"))
+        rec["queue"] = where() if rec.get("status") == "queued" else None
+        state = (rec.get("status"), rec.get("error"), json.dumps(rec["queue"]))
         if last_state is None:  # the first event says where the run stands
             last_state = state
             yield _event("status", rec)

@@ -24,8 +24,8 @@ from urllib.parse import quote
 
 from saucerfab.errors import ConfigError
 from saucerfab.files.fileio import exclusive_lock
-from saucerfab.studio.jobs import DEFAULT_JOBS
-from saucerfab.studio.workspace import MAX_UPLOAD_BYTES, Workspace
+from saucerfab.studio.jobs import DEFAULT_JOBS, DEFAULT_MAX_QUEUED_PER_USER
+from saucerfab.studio.workspace import MAX_UPLOAD_BYTES, MAX_USER_UPLOAD_BYTES, Workspace
 
 #: the address served by default: this machine only
 DEFAULT_HOST = "127.0.0.1"
@@ -89,6 +89,9 @@ def serve(
     token: str | None = None,
     token_file: str | Path | None = None,
     no_auth: bool = False,
+    max_queued_per_user: int = DEFAULT_MAX_QUEUED_PER_USER,
+    max_user_upload_bytes: int = MAX_USER_UPLOAD_BYTES,
+    scheduler: str | None = None,
 ) -> int:
     """Serve the studio until Ctrl-C; returns the exit code.
 
@@ -97,16 +100,16 @@ def serve(
             ``USER:TOKEN`` lines (at most one of them and ``$SAUCERFAB_STUDIO_TOKEN``);
             none: a random token, printed in the banner's URL.
         no_auth: no sign-in (anyone who can reach the studio uses it).
+        max_queued_per_user: designs one user may have waiting (0: no limit).
+        max_user_upload_bytes: bytes of uploads one user may keep.
+        scheduler: ``tcp://HOST:PORT`` of a Dask scheduler to run the jobs on
+            (:mod:`saucerfab.studio.cluster`; the workspace must be on a filesystem its workers see).
 
     Raises:
         ConfigError: a bad workspace, another studio on it, a port in use, bad
             numbers, contradictory or weak tokens, a network host without a token.
     """
-    import uvicorn
-
-    from saucerfab.studio.app import create_app
     from saucerfab.studio.auth import resolve_auth
-    from saucerfab.studio.guard import LOOPBACK_NAMES
 
     if not 0 <= port <= 65535:
         raise ConfigError(f"--port must be 0 to 65535, got {port}")
@@ -114,6 +117,10 @@ def serve(
         raise ConfigError(f"--jobs must be at least 1, got {jobs}")
     if max_upload_bytes < 1:
         raise ConfigError(f"--max-upload-mb must be positive, got {max_upload_bytes / 2**20:g}")
+    if max_user_upload_bytes < 1:
+        raise ConfigError(f"--max-user-upload-mb must be positive, got {max_user_upload_bytes / 2**20:g}")
+    if max_queued_per_user < 0:
+        raise ConfigError(f"--max-queued-per-user must be 0 (no limit) or more, got {max_queued_per_user}")
     auth, made = resolve_auth(token, token_file, no_auth, host=host, loopback=is_loopback(host), env=os.environ)
     ws = Workspace(workspace)
     busy = lambda: ConfigError(  # noqa: E731
@@ -122,25 +129,51 @@ def serve(
     )
     with exclusive_lock(ws.root / ".lock", busy):
         _check_port(host, port)
-        app = create_app(ws.root, jobs=jobs, max_upload_bytes=max_upload_bytes,
-                         allowed_hosts=LOOPBACK_NAMES if is_loopback(host) else None, auth=auth)
-        url = url_of(host, port)
-        if made is not None:  # printed once, here: the URL signs the browser in (and the token leaves it)
-            url += "?token=" + quote(made, safe="")
-        print(f"saucerfab studio: {url}  (workspace {ws.root}; Ctrl-C stops it, running designs are kept "
-              "and resume later)", flush=True)
-        if auth.required and made is None:  # a given token is not printed: a service's output goes to its log
-            who = "each user with their own token from" if len(auth.tokens or {}) > 1 else "with the token of"
-            print(f"saucerfab studio: sign in {who} {auth.source}", flush=True)
-        if not auth.required and not is_loopback(host):
-            print(f"saucerfab studio: warning: serving on {host} with --no-auth: anyone on the network who can "
-                  "reach this machine can use the studio and its files; there is no authentication",
-                  file=sys.stderr, flush=True)
-        server = uvicorn.Server(server_config(app, host, port))
-        if open_browser:
-            threading.Thread(target=_open_when_up, args=(server, url), daemon=True).start()
-        server.run()
-        return 0 if server.started else 2
+        cluster = None
+        if scheduler:
+            from saucerfab.studio.cluster import DaskCluster
+
+            cluster = DaskCluster(scheduler, ws.root)  # refuses a cluster whose workers do not see the workspace
+        try:
+            return _serve(ws, host, port, jobs, max_upload_bytes, max_queued_per_user, max_user_upload_bytes,
+                          cluster, auth, made, open_browser)
+        finally:
+            if cluster is not None:
+                cluster.close()
+
+
+def _serve(ws: Workspace, host: str, port: int, jobs: int, max_upload_bytes: int, max_queued_per_user: int,
+           max_user_upload_bytes: int, cluster: Any, auth: Any, made: str | None, open_browser: bool) -> int:
+    """Build the app, print the banner, run uvicorn until Ctrl-C (the workspace is locked by the caller)."""
+    import uvicorn
+
+    from saucerfab.studio.app import create_app
+    from saucerfab.studio.guard import LOOPBACK_NAMES
+
+    app = create_app(ws.root, jobs=jobs, max_upload_bytes=max_upload_bytes,
+                     allowed_hosts=LOOPBACK_NAMES if is_loopback(host) else None, auth=auth,
+                     max_queued_per_user=max_queued_per_user, max_user_upload_bytes=max_user_upload_bytes,
+                     cluster=cluster)
+    if cluster is not None:
+        print(f"saucerfab studio: designs and exports run on the Dask cluster at {cluster.address} "
+              f"({cluster.slots()} at once)", flush=True)
+    url = url_of(host, port)
+    if made is not None:  # printed once, here: the URL signs the browser in (and the token leaves it)
+        url += "?token=" + quote(made, safe="")
+    print(f"saucerfab studio: {url}  (workspace {ws.root}; Ctrl-C stops it, running designs are kept "
+          "and resume later)", flush=True)
+    if auth.required and made is None:  # a given token is not printed: a service's output goes to its log
+        who = "each user with their own token from" if len(auth.tokens or {}) > 1 else "with the token of"
+        print(f"saucerfab studio: sign in {who} {auth.source}", flush=True)
+    if not auth.required and not is_loopback(host):
+        print(f"saucerfab studio: warning: serving on {host} with --no-auth: anyone on the network who can "
+              "reach this machine can use the studio and its files; there is no authentication",
+              file=sys.stderr, flush=True)
+    server = uvicorn.Server(server_config(app, host, port))
+    if open_browser:
+        threading.Thread(target=_open_when_up, args=(server, url), daemon=True).start()
+    server.run()
+    return 0 if server.started else 2
 
 
 def _open_when_up(server: object, url: str) -> None:

@@ -351,3 +351,7 @@ def _export_job(ws: Workspace, run_id: str, printer: str) -> None:
         if (out.is_dir() and not (out / "export.json").is_file()):
             shutil.rmtree(out, ignore_errors=True)  # nothing half made is left to download
 
+
+
+if __name__ == "__main__":  # a job on a Dask worker (saucerfab.studio.cluster.run_job): ROOT KIND RUN_ID [PRINTER]
+    main(*sys.argv[1:5])

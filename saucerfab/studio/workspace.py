@@ -57,6 +57,8 @@ FINAL = ("done", "failed", "cancelled", "interrupted")
 ACTIVE = ("queued", "running", "cancelling")
 #: the largest upload accepted by default, bytes (streamed; the rest is refused with 413)
 MAX_UPLOAD_BYTES = 64 << 20
+#: the most bytes of uploads one user may keep by default (``--max-user-upload-mb``; more is refused with 413)
+MAX_USER_UPLOAD_BYTES = 1 << 30
 #: thumbnails' longest side, pixels
 THUMB_PX = 256
 #: the longest display name kept for an upload, characters
@@ -94,6 +96,12 @@ class TooLarge(StudioError):
     """An upload over the size limit (413)."""
 
     status = 413
+
+
+class TooMany(StudioError):
+    """A user's share of the queue is full (429: try again once one of their runs has started)."""
+
+    status = 429
 
 
 def now_iso() -> str:
@@ -328,7 +336,11 @@ class Workspace:
                 "options": options,
                 "status": "queued", "error": None, "started": None, "finished": None, "exports": {},
             }
-            write_json(d / "run.json", rec)
+            try:
+                write_json(d / "run.json", rec)
+            except BaseException:  # a full disk: no folder without a record is left behind
+                shutil.rmtree(d, ignore_errors=True)
+                raise
             return rec
         raise StudioError("could not make a new run id; try again")  # 100 collisions: never in practice
 
@@ -401,6 +413,16 @@ class Workspace:
         return designs, exports
 
     # ------------------------------------------------------------------ uploads
+
+    def upload_bytes(self) -> int:
+        """Bytes of the uploads in this view's folder (the user's; ``uploads/`` for the shared user), as their
+        records say (the stored file's size)."""
+        total = 0
+        for rec_path in self.uploads.glob("*/upload.json"):
+            rec = _read_json(rec_path)
+            if rec is not None and isinstance(rec.get("bytes"), int):
+                total += rec["bytes"]
+        return total
 
     def incoming(self) -> tuple[int, Path]:
         """A new temporary file under the workspace for an upload being received: (open fd, path)."""

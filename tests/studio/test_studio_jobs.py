@@ -8,7 +8,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from studio_helpers import HEART, STAR, TINY
 
 from saucerfab.studio.jobs import Job, JobQueue

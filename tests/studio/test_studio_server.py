@@ -61,3 +61,10 @@ def test_banner_and_the_network_warning(tmp_path: Path, capsys: pytest.CaptureFi
     assert "anyone on the network" in err and "no authentication" in err
     main(["studio", "--workspace", str(tmp_path / "ws"), "--port", "0"])
     assert "warning" not in capsys.readouterr().err
+
+
+def test_jobs_and_a_scheduler_contradict_each_other(tmp_path, capsys) -> None:  # noqa: ANN001
+    assert main(["studio", "--workspace", str(tmp_path / "w"), "--no-auth", "--jobs", "2",
+                 "--scheduler", "tcp://127.0.0.1:1"]) == 2
+    assert "--jobs and --scheduler contradict" in capsys.readouterr().err
+    assert not (tmp_path / "w").exists()  # refused before anything was made

@@ -116,7 +116,12 @@ export class RunView {
     this.status = s;
     if (s === "queued") {
       // a progress.json left by an earlier attempt says nothing about the wait
-      this.progressText("Queued: it starts as soon as the designs before it are finished.", "");
+      // the run's place in the queue (the users take turns): record.queue, kept up to date by the event stream
+      const q = record.queue;
+      const wait = !q ? "it starts as soon as the designs before it are finished."
+        : q.ahead === 0 ? "it starts next, as soon as a worker is free."
+        : `${q.ahead} ${q.ahead === 1 ? "job" : "jobs"} ahead of you (place ${q.position} of ${q.queued}; the designers take turns).`;
+      this.progressText(`Queued: ${wait}`, "");
       this.bar(0);
       $("#progress-energies").replaceChildren();
     } else if (record.progress) {
