@@ -171,17 +171,44 @@ def _serve(ws: Workspace, host: str, port: int, jobs: int, max_upload_bytes: int
               file=sys.stderr, flush=True)
     server = uvicorn.Server(server_config(app, host, port))
     if open_browser:
-        threading.Thread(target=_open_when_up, args=(server, url), daemon=True).start()
+        threading.Thread(target=_open_when_up, args=(server, url, ws.root), daemon=True).start()
     server.run()
     return 0 if server.started else 2
 
 
-def _open_when_up(server: object, url: str) -> None:
-    """Open ``url`` in the user's browser once uvicorn is listening."""
+#: the page ``--open`` hands the browser when the URL holds the token (in the workspace, the user's alone)
+OPEN_PAGE = ".open.html"
+
+
+def browser_target(url: str, folder: Path) -> str:
+    """What ``--open`` gives the browser: ``url``, or, when it holds the token, a local page that goes there.
+
+    A URL on the browser's command line is visible to every user of the machine in its process list;
+    as Jupyter does, the token goes into a file only this user may read (``folder/.open.html``, mode
+    0600) whose page redirects to ``url``, and the browser is given that file's address.
+    """
+    import html
+
+    if "token=" not in url:
+        return url
+    page = (f'<!DOCTYPE html><html><head><meta charset="utf-8"><meta http-equiv="refresh" content="0;url='
+            f'{html.escape(url, quote=True)}"><title>saucerfab studio</title></head><body><p><a href="'
+            f'{html.escape(url, quote=True)}">Open the studio</a></p></body></html>\n')
+    path = folder / OPEN_PAGE
+    tmp = folder / f".{OPEN_PAGE}.{os.getpid()}.tmp"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)  # never readable by others, even briefly
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(page)
+    os.replace(tmp, path)
+    return path.resolve().as_uri()
+
+
+def _open_when_up(server: object, url: str, folder: Path) -> None:
+    """Open the studio in the user's browser once uvicorn is listening (the token kept off the command line)."""
     import webbrowser
 
     for _ in range(300):
         if getattr(server, "started", False):
-            webbrowser.open(url)
+            webbrowser.open(browser_target(url, folder))
             return
         time.sleep(0.1)

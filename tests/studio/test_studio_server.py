@@ -68,3 +68,19 @@ def test_jobs_and_a_scheduler_contradict_each_other(tmp_path, capsys) -> None:  
                  "--scheduler", "tcp://127.0.0.1:1"]) == 2
     assert "--jobs and --scheduler contradict" in capsys.readouterr().err
     assert not (tmp_path / "w").exists()  # refused before anything was made
+
+
+def test_open_keeps_the_token_off_the_browsers_command_line(tmp_path: Path) -> None:
+    """--open gives the browser a page only this user can read, which goes on to the URL with the token."""
+    import stat
+
+    from saucerfab.studio.server import OPEN_PAGE, browser_target
+
+    assert browser_target("http://127.0.0.1:8000/", tmp_path) == "http://127.0.0.1:8000/"  # no token: as it is
+    secret = "s3cret-token-of-the-test-0123456789"
+    target = browser_target(f"http://127.0.0.1:8000/?token={secret}", tmp_path)
+    assert secret not in target and target == (tmp_path / OPEN_PAGE).resolve().as_uri()
+    page = tmp_path / OPEN_PAGE
+    assert stat.S_IMODE(page.stat().st_mode) == 0o600
+    assert f'url=http://127.0.0.1:8000/?token={secret}"' in page.read_text()
+    assert not list(tmp_path.glob("*.tmp"))
