@@ -35,20 +35,15 @@ import logging
 import re
 import secrets
 import time
-from collections.abc import Awaitable, Callable, Mapping, MutableMapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qsl, quote, urlencode
 
 from saucerfab.errors import ConfigError
+from saucerfab.studio.guard import ASGIApp, Receive, Scope, Send
 from saucerfab.studio.workspace import SHARED_USER, USER_RE
-
-Scope = MutableMapping[str, Any]
-Message = MutableMapping[str, Any]
-Receive = Callable[[], Awaitable[Message]]
-Send = Callable[[Message], Awaitable[None]]
-ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 #: the environment variable a service gives the token in
 TOKEN_ENV = "SAUCERFAB_STUDIO_TOKEN"
