@@ -78,8 +78,22 @@ from saucerfab.batch.manifest_lines import (
     resolve_inside,
     toml_loads,
 )
-from saucerfab.errors import ConfigError
-from saucerfab.optimize.request import IMAGE_ROLES, DesignRequest
+from saucerfab.errors import ConfigError, SaucerfabError
+from saucerfab.optimize.request import IMAGE_ROLES, TYPE_WORDS, DesignRequest, OptionsDoor
+
+#: how a manifest's design_options are checked and worded: a manifest is fixed in an editor, so every
+#: mistake is listed at once, with the manifest's key (tests/batch pins the messages)
+MANIFEST_DOOR = OptionsDoor(
+    words={**TYPE_WORDS, "str": "a string", "path": "a path"},
+    text_max=None,
+    finite=False,
+    paths_as_text=False,
+    all_at_once=True,
+    unknown=lambda names, known: f"unknown design option(s) {sorted(names)}; allowed: {sorted(known)}",
+    mistyped=lambda bad: "design_options: " + "; ".join(f"{n} must be {w}, got {v!r}" for n, w, v in bad),
+    build_errors=(SaucerfabError, TypeError),
+    build_prefix="design_options: ",
+)
 
 #: most jobs in one manifest
 MAX_JOBS = 100_000
@@ -418,11 +432,10 @@ def _check_design_options(
         ConfigError: ``unknown design option(s) [...]; allowed: [...]``, else
             ``design_options: ...``: every mistyped option at once, else the first refused value.
     """
-    from saucerfab.errors import SaucerfabError
     from saucerfab.model.heightfield import check_height_scale
 
     request = DesignRequest.from_options(
-        options, where="manifest", allowed=design_option_keys(),
+        options, door=MANIFEST_DOOR, allowed=design_option_keys(),
         inputs={"direct": files["direct"], "reflected": files["reflected"]},
     )
     try:
@@ -443,7 +456,6 @@ def _check_design_options(
 def _scene_problem(scene: str, cup: str | None, options: dict[str, Any]) -> str | None:
     """Why the design run's scene (preset ``scene``, ``cup`` override) cannot be built
     with these design options, in the design's own words, or None when it can."""
-    from saucerfab.errors import SaucerfabError
     from saucerfab.optimize.prepare import build_scene
 
     try:
@@ -593,7 +605,6 @@ def load_manifest(path: str | os.PathLike[str]) -> Manifest:
             nothing more can be read), unknown keys, duplicate ids, input files
             missing or leaving the manifest's folder, unknown printers, bad values.
     """
-    from saucerfab.errors import SaucerfabError
     from saucerfab.model.profiles import load_profile
 
     path = Path(path)

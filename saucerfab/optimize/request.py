@@ -16,7 +16,7 @@ import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, make_dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from saucerfab.errors import ConfigError, SaucerfabError
 from saucerfab.imaging.fitting import FITS
@@ -322,7 +322,7 @@ class DesignRequest(_Weights):
         cls,
         options: Mapping[str, object],
         *,
-        where: OptionsDoor,
+        door: OptionsDoor,
         allowed: frozenset[str] | None = None,
         inputs: Mapping[str, object] | None = None,
         error: type[SaucerfabError] = ConfigError,
@@ -332,8 +332,8 @@ class DesignRequest(_Weights):
         Args:
             options: field name -> value as the front door read it (TOML, CSV, JSON values);
                 checked and converted by :func:`checked_options`.
-            where: the front door (:data:`OptionsDoor`): its messages, and which errors
-                of building the request it rewords (:data:`_DOORS`).
+            door: the front door (:class:`OptionsDoor`): its messages, and which errors
+                of building the request it rewords.
             allowed: the fields ``options`` may set; None: every field.
             inputs: fields the front door resolved itself (image paths, an uploaded
                 shape's path), laid over ``options`` unchecked.
@@ -344,8 +344,7 @@ class DesignRequest(_Weights):
                 a value the request refuses (as the request raised it, or as ``error``
                 with the door's prefix).
         """
-        door = _DOORS[where]
-        kwargs = checked_options(options, where=where, allowed=allowed, error=error)
+        kwargs = checked_options(options, door=door, allowed=allowed, error=error)
         try:
             return cls(**{**kwargs, **(inputs or {})})
         except door.build_errors as exc:
@@ -354,14 +353,13 @@ class DesignRequest(_Weights):
 
 # --------------------------------------------------------------------------- options from a front door
 
-#: the front doors that turn a mapping of options into a request: the batch
-#: manifest's ``design_options`` and the studio's run form
-OptionsDoor = Literal["manifest", "studio"]
-
-
 @dataclass(frozen=True)
-class _Door:
+class OptionsDoor:
     """How one front door takes a mapping of design options, and words what it refuses.
+
+    Each door defines its own (the batch manifest's ``design_options``:
+    :data:`saucerfab.batch.manifest.MANIFEST_DOOR`; the studio's run form:
+    :data:`saucerfab.studio.options.STUDIO_DOOR`); the check is this module's.
 
     Attributes:
         words: what a value of each kind (``bool``, ``int``, ``float``, ``str``, ``path``) must be, in
@@ -389,35 +387,8 @@ class _Door:
     build_prefix: str
 
 
-_TYPE_WORDS = {"bool": "true or false", "int": "a whole number", "float": "a number"}
-#: each door's messages are the ones it gave before the doors shared this check
-#: (tests/batch and tests/studio pin them)
-_DOORS: dict[str, _Door] = {
-    # a manifest is fixed in an editor: every mistake is listed at once, with the manifest's key
-    "manifest": _Door(
-        words={**_TYPE_WORDS, "str": "a string", "path": "a path"},
-        text_max=None,
-        finite=False,
-        paths_as_text=False,
-        all_at_once=True,
-        unknown=lambda names, known: f"unknown design option(s) {sorted(names)}; allowed: {sorted(known)}",
-        mistyped=lambda bad: "design_options: " + "; ".join(f"{n} must be {w}, got {v!r}" for n, w, v in bad),
-        build_errors=(SaucerfabError, TypeError),
-        build_prefix="design_options: ",
-    ),
-    # a form sends JSON: NaN is a JSON number to Python, and a text has a bound (it is recorded and shown)
-    "studio": _Door(
-        words={**_TYPE_WORDS, "str": "a short text", "path": "an upload id"},
-        text_max=200,
-        finite=True,
-        paths_as_text=True,
-        all_at_once=False,
-        unknown=lambda names, known: f"unknown option {names[0]!r}; the options are: {', '.join(sorted(known))}",
-        mistyped=lambda bad: "; ".join(f"option {n!r} must be {w}, got {v!r}" for n, w, v in bad),
-        build_errors=(TypeError, ValueError),  # a value the dataclass could not even compare
-        build_prefix="bad design options: ",
-    ),
-}
+#: what a value of each kind must be, in words every door may start from
+TYPE_WORDS = {"bool": "true or false", "int": "a whole number", "float": "a number"}
 
 
 @functools.lru_cache(maxsize=1)
@@ -427,7 +398,7 @@ def _request_hints() -> dict[str, Any]:
     return {f.name: hints[f.name] for f in fields(DesignRequest) if f.init}
 
 
-def _fit(value: object, hint: Any, door: _Door) -> tuple[object, str | None]:
+def _fit(value: object, hint: Any, door: OptionsDoor) -> tuple[object, str | None]:
     """(``value`` converted, None) when it fits the annotation ``hint``, else (``value``, what it must be).
 
     Covers the annotations of :class:`DesignRequest` (``bool``, ``int``, ``float``, ``str``,
@@ -475,7 +446,7 @@ def _fit(value: object, hint: Any, door: _Door) -> tuple[object, str | None]:
     return value, None
 
 
-def _fit_tuple(value: object, args: tuple[Any, ...], door: _Door) -> tuple[object, str | None]:
+def _fit_tuple(value: object, args: tuple[Any, ...], door: OptionsDoor) -> tuple[object, str | None]:
     """:func:`_fit` for ``tuple[X, ...]`` (``args`` ``(X, Ellipsis)``) and ``tuple[X, Y, ...]`` (fixed length)."""
     variadic = len(args) == 2 and args[1] is Ellipsis
     items = [args[0]] if variadic else list(args)
@@ -495,7 +466,7 @@ def _fit_tuple(value: object, args: tuple[Any, ...], door: _Door) -> tuple[objec
 def checked_options(
     options: Mapping[str, object],
     *,
-    where: OptionsDoor,
+    door: OptionsDoor,
     allowed: frozenset[str] | None = None,
     extra: Mapping[str, Any] | None = None,
     error: type[SaucerfabError] = ConfigError,
@@ -512,7 +483,7 @@ def checked_options(
 
     Args:
         options: field name -> value, as the front door read it.
-        where: the front door (:data:`OptionsDoor`); its messages (:data:`_DOORS`).
+        door: the front door (:class:`OptionsDoor`): its messages and rules.
         allowed: the fields ``options`` may set; None: every init field.
         extra: the front door's own options (name -> annotation), checked and returned
             the same way (an ``object`` annotation takes any value).
@@ -525,7 +496,6 @@ def checked_options(
         SaucerfabError: as ``error``: unknown names, else values of the wrong type
             (all at once or the first, as the door says).
     """
-    door = _DOORS[where]
     fields_hints = _request_hints()
     names = fields_hints.keys() if allowed is None else allowed
     if strange := sorted(set(names) - fields_hints.keys()):  # a caller's mistake, not the user's

@@ -22,7 +22,22 @@ from __future__ import annotations
 from typing import Any
 
 from saucerfab.errors import ConfigError
+from saucerfab.optimize.request import TYPE_WORDS, OptionsDoor
 from saucerfab.studio.workspace import UPLOAD_ID_RE, NotFound, StudioError, Workspace
+
+#: how the run form's options are checked and worded: a form sends JSON (NaN is a JSON number to Python)
+#: and a text has a bound (it is recorded and shown); the first problem alone (tests/studio pins the messages)
+STUDIO_DOOR = OptionsDoor(
+    words={**TYPE_WORDS, "str": "a short text", "path": "an upload id"},
+    text_max=200,
+    finite=True,
+    paths_as_text=True,
+    all_at_once=False,
+    unknown=lambda names, known: f"unknown option {names[0]!r}; the options are: {', '.join(sorted(known))}",
+    mistyped=lambda bad: "; ".join(f"option {n!r} must be {w}, got {v!r}" for n, w, v in bad),
+    build_errors=(TypeError, ValueError),  # a value the dataclass could not even compare
+    build_prefix="bad design options: ",
+)
 
 #: the fields that take an upload id
 UPLOAD_FIELDS = ("direct", "reflected", "reflected2", "direct_mask", "reflected_mask", "reflected2_mask")
@@ -92,7 +107,7 @@ def check_options(ws: Workspace, body: Any) -> tuple[dict[str, Any], str]:
         raise StudioError('the run options must be a JSON object, e.g. {"direct": UPLOAD_ID, "reflected": UPLOAD_ID}')
     title = body.get("title")
     given = {k: v for k, v in body.items() if v is not None}  # null: not given (as in merged_options)
-    options: dict[str, Any] = checked_options(given, where="studio", extra=_STUDIO_OPTIONS, error=StudioError)
+    options: dict[str, Any] = checked_options(given, door=STUDIO_DOOR, extra=_STUDIO_OPTIONS, error=StudioError)
     options.pop("title", None)
     for name in ("direct", "reflected"):
         if name not in options:
@@ -137,7 +152,7 @@ def design_request(ws: Workspace, options: dict[str, Any]) -> Any:
         raise ConfigError(f"unknown scene {given['scene']!r}; the studio's scenes are {sorted(PRESETS)}")
     if "printer" in given and given["printer"] not in list_profiles():
         raise ConfigError(f"unknown printer {given['printer']!r}; the printers are {sorted(list_profiles())}")
-    return DesignRequest.from_options(given, where="studio", inputs=paths)
+    return DesignRequest.from_options(given, door=STUDIO_DOOR, inputs=paths)
 
 
 def validate_run(ws: Workspace, options: dict[str, Any]) -> None:

@@ -13,14 +13,13 @@ from typing import Any
 
 import pytest
 
+from saucerfab.batch.manifest import MANIFEST_DOOR
 from saucerfab.errors import ConfigError, SaucerfabError
-from saucerfab.optimize.request import (
-    _DOORS,
-    DesignRequest,
-    _fit,
-    _request_hints,
-    checked_options,
-)
+from saucerfab.optimize.request import DesignRequest, _fit, _request_hints, checked_options
+from saucerfab.studio.options import STUDIO_DOOR
+
+#: each front door's policy (the doors define them; the check is the request's)
+_DOORS = {"manifest": MANIFEST_DOOR, "studio": STUDIO_DOOR}
 
 DOORS = ("manifest", "studio")
 #: a good value of each annotation DesignRequest uses, as TOML / JSON give it, and what it becomes
@@ -44,7 +43,7 @@ def _kind(hint: Any) -> str:
 
 def _refusal(options: dict[str, object], where: str, **kw: Any) -> str:
     with pytest.raises(ConfigError) as exc:
-        checked_options(options, where=where, **kw)  # type: ignore[arg-type]
+        checked_options(options, door=_DOORS[where], **kw)  # type: ignore[arg-type]
     return str(exc.value)
 
 
@@ -55,7 +54,7 @@ def _refusal(options: dict[str, object], where: str, **kw: Any) -> str:
 def test_every_field_type_is_taken_and_converted(where: str) -> None:
     hints = _request_hints()
     options = {name: GOOD[_kind(hint)][0] for name, hint in hints.items()}
-    out = checked_options(options, where=where)  # type: ignore[arg-type]
+    out = checked_options(options, door=_DOORS[where])  # type: ignore[arg-type]
     assert out == {name: GOOD[_kind(hint)][1] for name, hint in hints.items()}
     assert list(out) == list(options)  # in the order given
     for name, hint in hints.items():
@@ -70,7 +69,7 @@ def test_the_annotations_covered_are_the_requests() -> None:
 
 @pytest.mark.parametrize("where", DOORS)
 def test_none_is_taken_where_the_field_is_optional_only(where: str) -> None:
-    assert checked_options({"resolution": None, "background": None}, where=where) == {  # type: ignore[arg-type]
+    assert checked_options({"resolution": None, "background": None}, door=_DOORS[where]) == {  # type: ignore[arg-type]
         "resolution": None,
         "background": None,
     }
@@ -83,7 +82,7 @@ def test_a_request_is_built_from_plain_values() -> None:
         "seed": 3, "height_scale": 1, "max_iters": 5, "record_times": False, "w_large": 1, "ipd_mm": None,
     }
     for where in DOORS:
-        r = DesignRequest.from_options(options, where=where)  # type: ignore[arg-type]
+        r = DesignRequest.from_options(options, door=_DOORS[where])  # type: ignore[arg-type]
         assert r.direct == Path("a.png") and r.reflected == Path("b.png") and r.shape == "bowl"
         assert r.height_scale == 1.0 and type(r.height_scale) is float and r.w_large == 1.0
         assert (r.resolution, r.image_size, r.seed, r.max_iters, r.record_times) == (24, 32, 3, 5, False)
@@ -92,12 +91,12 @@ def test_a_request_is_built_from_plain_values() -> None:
 def test_inputs_are_laid_over_the_options_unchecked() -> None:
     # the studio's upload ids become the uploads' paths; the batch's images are its own keys
     r = DesignRequest.from_options(
-        {"direct": "0123456789abcdef", "reflected": "fedcba9876543210"}, where="studio",
+        {"direct": "0123456789abcdef", "reflected": "fedcba9876543210"}, door=STUDIO_DOOR,
         inputs={"direct": Path("/up/a.png"), "reflected": Path("/up/b.png")},
     )
     assert (r.direct, r.reflected) == (Path("/up/a.png"), Path("/up/b.png"))
     r = DesignRequest.from_options(
-        {"max_iters": 3}, where="manifest", allowed=frozenset({"max_iters"}),
+        {"max_iters": 3}, door=MANIFEST_DOOR, allowed=frozenset({"max_iters"}),
         inputs={"direct": Path("a.png"), "reflected": Path("b.png")},
     )
     assert r.max_iters == 3
@@ -140,21 +139,21 @@ def test_wrong_types_are_refused_in_each_doors_words(name: str, value: object, w
 def test_paths_are_texts_at_the_studio() -> None:
     assert _refusal({"direct": 5}, "studio") == "option 'direct' must be an upload id, got 5"
     assert _refusal({"direct_mask": Path("m.png")}, "studio").startswith("option 'direct_mask' must be an upload id")
-    assert checked_options({"direct": Path("a.png")}, where="manifest") == {"direct": Path("a.png")}
+    assert checked_options({"direct": Path("a.png")}, door=MANIFEST_DOOR) == {"direct": Path("a.png")}
     assert _refusal({"direct": 5}, "manifest") == "design_options: direct must be a path, got 5"
 
 
 def test_the_studio_bounds_texts_and_refuses_nan_the_manifest_leaves_them_to_the_request() -> None:
     long = "x" * 201
     assert "must be a short text" in _refusal({"eyes": long}, "studio")
-    assert checked_options({"eyes": long}, where="manifest") == {"eyes": long}
+    assert checked_options({"eyes": long}, door=MANIFEST_DOOR) == {"eyes": long}
     for v in (math.nan, math.inf, 10**400):  # JSON numbers Python reads (a whole number of any length)
         assert _refusal({"ipd_mm": v}, "studio").startswith("option 'ipd_mm' must be a number")
-    out = checked_options({"height_scale": math.nan}, where="manifest")
+    out = checked_options({"height_scale": math.nan}, door=MANIFEST_DOOR)
     assert math.isnan(out["height_scale"])  # type: ignore[arg-type]
     # ... which the request refuses, in the manifest's words
     with pytest.raises(ConfigError, match=r"^design_options: w_large must be a non-negative number, got nan"):
-        DesignRequest.from_options({"direct": "a", "reflected": "b", "w_large": math.nan}, where="manifest")
+        DesignRequest.from_options({"direct": "a", "reflected": "b", "w_large": math.nan}, door=MANIFEST_DOOR)
 
 
 def test_unknown_fields_are_refused_with_the_names_known() -> None:
@@ -186,25 +185,25 @@ def test_the_door_chooses_the_error_class_and_the_building_errors_words() -> Non
         pass
 
     with pytest.raises(DoorError, match="option 'seed'"):
-        checked_options({"seed": "x"}, where="studio", error=DoorError)
+        checked_options({"seed": "x"}, door=STUDIO_DOOR, error=DoorError)
     with pytest.raises(DoorError, match="^unknown option 'zeta'"):
-        DesignRequest.from_options({"zeta": 1}, where="studio", error=DoorError)
+        DesignRequest.from_options({"zeta": 1}, door=STUDIO_DOOR, error=DoorError)
     # a value the request refuses: the manifest says where, the studio passes the request's words on
     bad = {"direct": "a", "reflected": "b", "max_iters": 0}
     with pytest.raises(ConfigError, match=r"^design_options: max_iters must be at least 1, got 0$"):
-        DesignRequest.from_options(bad, where="manifest")
+        DesignRequest.from_options(bad, door=MANIFEST_DOOR)
     with pytest.raises(ConfigError, match=r"^max_iters must be at least 1, got 0$"):
-        DesignRequest.from_options(bad, where="studio")
+        DesignRequest.from_options(bad, door=STUDIO_DOOR)
     # a request that cannot even be made (no pictures)
     with pytest.raises(ConfigError, match=r"^design_options: .*missing"):
-        DesignRequest.from_options({}, where="manifest")
+        DesignRequest.from_options({}, door=MANIFEST_DOOR)
     with pytest.raises(ConfigError, match=r"^bad design options: .*missing"):
-        DesignRequest.from_options({}, where="studio")
+        DesignRequest.from_options({}, door=STUDIO_DOOR)
 
 
 def test_allowed_names_must_be_fields() -> None:
     with pytest.raises(ValueError, match="zeta"):
-        checked_options({}, where="manifest", allowed=frozenset({"seed", "zeta"}))
+        checked_options({}, door=MANIFEST_DOOR, allowed=frozenset({"seed", "zeta"}))
 
 
 # --------------------------------------------------------------------------- the front doors call it
