@@ -21,6 +21,7 @@ from TOML with :func:`load_scene` and write one with :func:`scene_to_toml`.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -47,6 +48,14 @@ VIEW_NAMES = ("direct", "reflected", "reflected2")
 FULL_EXTENT = (1.0, 1.0)
 #: how close to 1 the larger side of an extent must be (written values are rounded)
 EXTENT_TOLERANCE = 1e-6
+#: the saucer's outlines: a rectangle of relief beside the cup (the paper's), or a disc with the cup at its centre
+SAUCER_OUTLINES = ("rectangle", "disc")
+#: on a disc, the ring around the cup's footprint that holds no design, mm: the export's cup seat (its
+#: clearance and rim: 0.5 + 4.0 mm by default, saucerfab/fabricate/options.py) stands there
+CUP_RING_MM = 5.0
+#: a disc's design region must be at least this wide around the cup's ring, mm (the smallest saucer named
+#: in the error is the cup's width plus twice this and the ring)
+MIN_DISC_BAND_MM = 10.0
 
 
 # --------------------------------------------------------------------------- views
@@ -103,17 +112,26 @@ class ViewFrame:
 class Saucer:
     """The saucer heightfield's footprint, resolution and height bound.
 
+    The heightfield is always a square grid over ``x_range`` x ``y_range``. A
+    ``"rectangle"`` saucer is all of it (the paper's, beside the cup). A
+    ``"disc"`` is the circle inscribed in it, centred on the cup's axis (the
+    ranges are ``(-R, R)`` both): the cup stands at its centre, and only the
+    grid's vertices on the disc and outside the cup's ring (:data:`CUP_RING_MM`)
+    carry the design (:mod:`saucerfab.model.footprint`).
+
     Attributes:
         x_range: (x0, x1), model units.
         y_range: (y0, y1), model units.
         resolution: vertices per side of the square grid (paper: 150).
         delta: bound on height change, |z - h| < delta, model units (paper: 0.05).
+        outline: one of :data:`SAUCER_OUTLINES`.
     """
 
     x_range: Vec2 = (-0.5, 0.5)
     y_range: Vec2 = (-1.5, -0.5)
     resolution: int = 150
     delta: float = 0.05
+    outline: str = "rectangle"
 
     def __post_init__(self) -> None:
         xr = as_vector("saucer x_range", self.x_range, 2)
@@ -130,11 +148,45 @@ class Saucer:
                 f"got {self.resolution!r}"
             )
         check_positive("delta", self.delta)
+        if self.outline not in SAUCER_OUTLINES:
+            raise ConfigError(f"the saucer's outline must be one of {', '.join(SAUCER_OUTLINES)}, got {self.outline!r}")
+        if self.outline == "disc" and not (
+            abs(xr[0] + xr[1]) < 1e-9 and abs(yr[0] + yr[1]) < 1e-9 and abs(xr[1] - yr[1]) < 1e-9
+        ):
+            raise ConfigError(
+                f"a disc saucer is centred on the cup: its x_range and y_range are both (-R, R) for its radius R "
+                f"(give [saucer] diameter instead); got x {xr} and y {yr}"
+            )
 
     @property
     def size(self) -> Vec2:
         """(width along x, depth along y), model units."""
         return (self.x_range[1] - self.x_range[0], self.y_range[1] - self.y_range[0])
+
+    @property
+    def is_disc(self) -> bool:
+        return self.outline == "disc"
+
+    @property
+    def radius(self) -> float:
+        """A disc's radius, model units (a rectangle: half its width)."""
+        return 0.5 * self.size[0]
+
+    def on_saucer(self, xy: np.ndarray) -> np.ndarray:
+        """(P,) bool: the points (P, 2) lie on the saucer's outline (a rectangle: its whole square)."""
+        p = np.asarray(xy, np.float64)
+        if not self.is_disc:
+            (x0, x1), (y0, y1) = self.x_range, self.y_range
+            return (p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)
+        # a hair inside the radius so the grid's four extreme vertices (exactly on it) count
+        return np.hypot(p[:, 0], p[:, 1]) <= self.radius * (1.0 + 1e-9)
+
+
+def disc_saucer(diameter: float, resolution: int, delta: float = 0.05) -> Saucer:
+    """A round saucer of ``diameter`` model units centred on the cup's axis."""
+    check_positive("saucer diameter", diameter)
+    r = 0.5 * float(diameter)
+    return Saucer(x_range=(-r, r), y_range=(-r, r), resolution=resolution, delta=delta, outline="disc")
 
 
 # --------------------------------------------------------------------------- scene
@@ -195,6 +247,9 @@ class Scene:
                     "camera) sideways so the two are not on one vertical line (the paper looks down "
                     "at about 45 degrees)"
                 )
+        if self.saucer.is_disc:
+            self._check_disc()
+            return
         # The saucer may not overlap the cup: test the footprint rectangle
         # densely against the cup (exact for circles, conservative enough for
         # the others at this sampling), then the cup outline against the box.
@@ -210,6 +265,25 @@ class Scene:
                 f"the saucer x {self.saucer.x_range}, y {self.saucer.y_range} overlaps the "
                 f"{self.cup.kind} cup; move the saucer away from the cup or shrink the cup"
             )
+
+    def _check_disc(self) -> None:
+        """A disc holds the cup at its centre: the cup, its ring and a band of design must fit inside it."""
+        outline = self.cup.boundary()
+        reach = float(np.hypot(outline[:, 0], outline[:, 1]).max())  # the cup's farthest point from the axis
+        s = self.mm_per_unit
+        smallest_mm = 2.0 * (reach * s + CUP_RING_MM + MIN_DISC_BAND_MM)
+        if 2.0 * self.saucer.radius * s < smallest_mm - 1e-9:
+            raise GeometryError(
+                f"the round saucer ({2.0 * self.saucer.radius * s:.1f} mm across) is too small for the "
+                f"{self.cup_diameter_mm:g} mm {self.cup.kind} cup at its centre, its {CUP_RING_MM:g} mm seat ring "
+                f"and a {MIN_DISC_BAND_MM:g} mm band of design; give a saucer of at least {math.ceil(smallest_mm - 1e-6):g} mm "
+                "(--saucer-diameter-mm) or a smaller cup"
+            )
+
+    @property
+    def cup_ring_units(self) -> float:
+        """The ring around the cup's footprint that holds no design on a disc (:data:`CUP_RING_MM`), model units."""
+        return CUP_RING_MM / self.mm_per_unit
 
     @property
     def cup_width_units(self) -> float:
@@ -246,8 +320,30 @@ def wide_scene() -> Scene:
     return replace(base, saucer=replace(base.saucer, x_range=WIDE_X_RANGE))
 
 
+#: a round saucer's diameter over the cup's width: 200 mm for the 80 mm cup. Measured (benchmarks/RESULTS.md,
+#: "The round saucer"): the mirror shows the saucer in a band around the cup's foot, as tall as the saucer
+#: reaches in front of the cup; at twice the cup (160 mm) a 2:1 reflected picture spans 36 % of the cup's
+#: width (the paper's rectangle: 44 %), at 2.5 times 68 %, at 3 times 77 % (and a square one 23 / 38 / 55 %).
+#: 200 mm fits every bundled printer but the HP (190 mm deep), which is refused naming the largest that fits.
+ROUND_DIAMETER_PER_CUP = 2.5
+#: grid vertices per model unit on a round saucer: the paper's step (150 across its 1-unit rectangle: 0.67 mm)
+ROUND_GRID_PER_UNIT = 149.0
+
+
+def round_grid(diameter: float) -> int:
+    """The grid resolution of a round saucer ``diameter`` model units across, at the paper's step."""
+    return int(min(MAX_GRID, max(MIN_GRID, round(diameter * ROUND_GRID_PER_UNIT) + 1)))
+
+
+def round_scene() -> Scene:
+    """The paper's eye and cup with a round saucer around it (:data:`ROUND_DIAMETER_PER_CUP`), the cup at its centre."""
+    base = Scene()
+    d = ROUND_DIAMETER_PER_CUP * base.cup.width_units
+    return replace(base, saucer=disc_saucer(d, round_grid(d), base.saucer.delta))
+
+
 #: the named scenes (``--scene NAME``, ``preset = "NAME"`` in a scene TOML)
-PRESETS = {"paper": paper_scene, "wide": wide_scene}
+PRESETS = {"paper": paper_scene, "wide": wide_scene, "round": round_scene}
 #: the scene a design gets when none is given (RESULTS.md, "The default scene", says why it is the paper's)
 DEFAULT_PRESET = "paper"
 
@@ -280,6 +376,8 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
             "y_range": list(s.y_range),
             "resolution": s.resolution,
             "delta": s.delta,
+            # written for a disc only: a rectangle's description stays what it was before discs
+            **({"outline": s.outline} if s.is_disc else {}),
         },
     }
 
@@ -315,13 +413,34 @@ def scene_from_dict(d: dict[str, Any], base: Scene | None = None) -> Scene:
                 start = getattr(base, name) or base.reflected
                 kw[name] = replace(start, **v)
         if "saucer" in d:
-            check_keys("[saucer]", d["saucer"], {"x_range", "y_range", "resolution", "delta"})
-            kw["saucer"] = replace(base.saucer, **d["saucer"])
+            kw["saucer"] = _saucer_from_dict(d["saucer"], base.saucer)
         if "cup" in d:
             kw["cup"] = cup_from_dict(d["cup"], base.cup.kind)
         return replace(base, **kw)
     except TypeError as exc:  # wrong arity from a malformed table
         raise ConfigError(f"invalid scene description: {exc}") from None
+
+
+def _saucer_from_dict(t: Any, base: Saucer) -> Saucer:
+    """The ``[saucer]`` table over ``base``: a disc may be given by its ``diameter`` (model units) instead of ranges."""
+    if not isinstance(t, dict):
+        raise ConfigError(f"invalid scene description: [saucer] must be a table, got {t!r}")
+    check_keys("[saucer]", t, {"x_range", "y_range", "resolution", "delta", "outline", "diameter"})
+    t = dict(t)
+    outline = t.get("outline", base.outline)
+    if "diameter" in t:
+        if outline != "disc":
+            raise ConfigError('[saucer] diameter is for a round saucer (outline = "disc"); a rectangle takes x_range and y_range')
+        if "x_range" in t or "y_range" in t:
+            raise ConfigError("[saucer] takes a disc's diameter or its ranges, not both")
+        d = t.pop("diameter")
+        if not isinstance(d, (int, float)) or isinstance(d, bool) or not math.isfinite(d) or d <= 0:
+            raise ConfigError(f"[saucer] diameter must be a positive number of model units, got {d!r}")
+        t["x_range"] = t["y_range"] = (-0.5 * d, 0.5 * d)
+        t.setdefault("resolution", round_grid(float(d)))
+    elif outline == "disc" and base.outline != "disc" and "x_range" not in t:
+        raise ConfigError('a round saucer (outline = "disc") needs its diameter: [saucer] diameter = 1.6 (model units)')
+    return replace(base, **t)
 
 
 def _toml_value(v: Any) -> str:

@@ -39,6 +39,7 @@ import numpy as np
 
 from saucerfab.errors import ConfigError
 from saucerfab.model.camera import Camera
+from saucerfab.model.footprint import design_vertices, direct_vertices
 from saucerfab.model.heightfield import make_grid
 from saucerfab.model.scene import Scene, ViewFrame
 from saucerfab.optimize.request import FRAMES
@@ -53,14 +54,16 @@ INSCRIBED_CELLS = 160
 SMALL_FIT_SHARE = 0.5
 
 
-def largest_inscribed_square(xy: np.ndarray, cells: int = INSCRIBED_CELLS) -> tuple[np.ndarray, float]:
+def largest_inscribed_square(xy: np.ndarray, cells: int = INSCRIBED_CELLS,
+                             centre_x: float | None = None) -> tuple[np.ndarray, float]:
     """Centre (2,) and half side of the largest axis-aligned square inside a region.
 
     The region is given by points dense in it (the projected saucer
     vertices): they are splatted onto a square grid over their bounding box,
     gaps closed, holes filled, and the result shrunk by one cell so the
     square stays strictly inside; the largest all-inside square of cells is
-    found by the usual dynamic programme.
+    found by the usual dynamic programme. With ``centre_x`` the square is
+    centred on that x (:func:`_largest_centred_square`).
     """
     from scipy import ndimage
 
@@ -74,6 +77,8 @@ def largest_inscribed_square(xy: np.ndarray, cells: int = INSCRIBED_CELLS) -> tu
     occ[ij[:, 1], ij[:, 0]] = True
     occ = ndimage.binary_closing(np.pad(occ, 3), structure=np.ones((3, 3)), iterations=2)[3:-3, 3:-3]
     occ = ndimage.binary_erosion(ndimage.binary_fill_holes(occ))
+    if centre_x is not None:
+        return _largest_centred_square(occ, lo, cell, float(centre_x))
     # dp[i, j]: side of the largest all-inside square whose bottom-right cell is (i, j)
     dp = np.zeros((n[1] + 1, n[0] + 1), np.int64)
     for i in range(n[1]):
@@ -91,23 +96,56 @@ def largest_inscribed_square(xy: np.ndarray, cells: int = INSCRIBED_CELLS) -> tu
     return lo + cell * centres[k], best * cell / 2
 
 
-def largest_inscribed_rectangle(xy: np.ndarray, aspect: float = 1.0,
-                                 cells: int = INSCRIBED_CELLS) -> tuple[np.ndarray, float, float]:
+def _largest_centred_square(occ: np.ndarray, lo: np.ndarray, cell: float, centre_x: float) -> tuple[np.ndarray, float]:
+    """The largest square of all-inside cells of ``occ`` (rows y, columns x) centred on ``centre_x``.
+
+    Its columns are the ``side`` cells nearest the centre line; the rows are
+    scanned with a summed-area table, largest size first; of the
+    positions that size the one nearest the region's centroid in y is kept.
+    """
+    rows, cols = occ.shape
+    sat = np.zeros((rows + 1, cols + 1), np.int64)
+    sat[1:, 1:] = np.cumsum(np.cumsum(occ, axis=0), axis=1)
+    c = (centre_x - float(lo[0])) / cell  # the centre line, in cells from the box's left edge
+    centroid_y = float(np.argwhere(occ)[:, 0].mean()) + 0.5 if occ.any() else 0.0
+    for side in range(min(rows, cols), 0, -1):  # largest first
+        j0 = int(round(c - side / 2))
+        j1 = j0 + side
+        if j0 < 0 or j1 > cols:
+            continue
+        i = np.arange(rows - side + 1)
+        full = (sat[i + side, j1] - sat[i, j1] - sat[i + side, j0] + sat[i, j0]) == side * side
+        if full.any():
+            starts = i[full]
+            k = int(np.argmin(np.abs(starts + side / 2 - centroid_y)))
+            centre = np.array([j0 + side / 2, starts[k] + side / 2])
+            return lo + cell * centre, side * cell / 2
+    raise ConfigError("the saucer's region in a view is too small to fit a frame in on the cup's axis; "
+                      "move the saucer or the camera")
+
+
+def largest_inscribed_rectangle(xy: np.ndarray, aspect: float = 1.0, cells: int = INSCRIBED_CELLS,
+                                centre_x: float | None = None) -> tuple[np.ndarray, float, float]:
     """Centre (2,), half width and half height of the largest axis-aligned rectangle of ``aspect``
-    (width over height) inside the region of the points ``xy`` (P, 2).
+    (width over height) inside the region of the points ``xy`` (P, 2), centred on ``centre_x`` if given.
 
     The square of :func:`largest_inscribed_square` in coordinates whose x is
     divided by ``aspect``: a square there is a rectangle of that aspect here.
     """
     scaled = np.asarray(xy, np.float64) / np.array([aspect, 1.0])
-    centre, half = largest_inscribed_square(scaled, cells)
+    centre, half = largest_inscribed_square(scaled, cells, None if centre_x is None else centre_x / aspect)
     return centre * np.array([aspect, 1.0]), half * aspect, half
 
 
-def refit_frame(cam: Camera, points: np.ndarray, mode: str, aspect: float = 1.0) -> ViewFrame:
+def refit_frame(cam: Camera, points: np.ndarray, mode: str, aspect: float = 1.0,
+                axis: np.ndarray | None = None) -> ViewFrame:
     """``cam``'s frame re-aimed from the same eye at ``points`` (P, 3): its picture, a rectangle of
     ``aspect`` (width over height), "inscribed" in the points' region, "contain"-ed in their
-    bounding box or "cover"-ing it; the square view holds the rectangle, its ``extent`` says where."""
+    bounding box or "cover"-ing it; the square view holds the rectangle, its ``extent`` says where.
+
+    ``axis`` (3,), a point in model units: an inscribed rectangle is centred on it left to right (a
+    round saucer's pictures stand on the cup's axis, in front of it and in its middle, not off
+    to one side where the region between saucer and cup happens to be widest)."""
     eye = np.asarray(cam.eye, np.float64)
     frame_cam = cam
     hw = hh = 1.0
@@ -115,7 +153,8 @@ def refit_frame(cam: Camera, points: np.ndarray, mode: str, aspect: float = 1.0)
         ndc = frame_cam.project(points)
         lo, hi = ndc[:, :2].min(axis=0), ndc[:, :2].max(axis=0)
         if mode == "inscribed":
-            centre, hw, hh = largest_inscribed_rectangle(ndc[:, :2], aspect)
+            cx = None if axis is None else float(frame_cam.project(np.asarray(axis, np.float64)[None])[0, 0])
+            centre, hw, hh = largest_inscribed_rectangle(ndc[:, :2], aspect, centre_x=cx)
         else:
             centre = (lo + hi) / 2
             half = (hi - lo) / 2
@@ -156,12 +195,17 @@ def fit_frames(
         raise ConfigError(f"frames mode must be one of {', '.join(FITTED_FRAMES)}, got {mode!r}")
     grid = make_grid(scene.saucer)
     h = np.asarray(heights, np.float64).reshape(-1)
-    direct = refit_frame(Camera.from_scene(scene, "direct"), grid.vertices(h), mode, aspects.get("direct", 1.0))
+    verts = grid.vertices(h)
+    # the design's vertices only (a disc: on it, clear of the cup; directly: not behind the cup)
+    seen = direct_vertices(scene, verts)
+    axis = np.zeros(3) if scene.saucer.is_disc else None  # the cup's axis (its bottom's centre)
+    direct = refit_frame(Camera.from_scene(scene, "direct"), verts[seen], mode, aspects.get("direct", 1.0), axis)
+    on = design_vertices(scene, grid.xy())
     pieces = reflect(scene, grid.xy())
 
     def region(facets: list[int] | None) -> np.ndarray:
         pts = [
-            p.reflected_vertices(h)[p.valid(h, scene.cup.height)]
+            p.reflected_vertices(h)[p.valid(h, scene.cup.height) & on]
             for p in pieces
             if facets is None or p.facet in facets
         ]
@@ -173,12 +217,12 @@ def fit_frames(
     cam_r = Camera.from_scene(scene, "reflected")
     a_r = aspects.get("reflected", 1.0)
     if groups is None:
-        return replace(scene, direct=direct, reflected=refit_frame(cam_r, region(None), mode, a_r))
+        return replace(scene, direct=direct, reflected=refit_frame(cam_r, region(None), mode, a_r, axis))
     return replace(
         scene,
         direct=direct,
-        reflected=refit_frame(cam_r, region(groups[0]), mode, a_r),
-        reflected2=refit_frame(cam_r, region(groups[1]), mode, aspects.get("reflected2", 1.0)),
+        reflected=refit_frame(cam_r, region(groups[0]), mode, a_r, axis),
+        reflected2=refit_frame(cam_r, region(groups[1]), mode, aspects.get("reflected2", 1.0), axis),
     )
 
 

@@ -291,4 +291,8 @@ class Surround:
         framed = np.logical_or.reduce([visible[v.name] for v in self.rig.views])
         faces = surround_faces(self.rig, self.wholes, heights, framed)
         backgrounds = backgrounds_of(self.prep.texture, self.background)
+        if self.rig.scene.saucer.is_disc and "direct" in faces:
+            # the rest of a disc (behind the cup, under its seat, the grid's corners the export cuts away)
+            # stays plain: the direct picture's background, never a smear of the pictures
+            faces["direct"] = faces["direct"] | ~np.logical_or.reduce([framed, *faces.values()])
         return [(faces[w.name], backgrounds[w.name]) for w in self.wholes]

@@ -140,7 +140,8 @@ def texture_saucer(
     nf = faces.shape[0]
 
     direct = rig.view("direct")
-    ndc_d = direct.camera.project(direct.vertices_np(h))[:, :2]
+    # every grid vertex (a disc's direct view takes only some): faces seen in neither view use it too
+    ndc_d = direct.camera.project(rig.grid.vertices(h))[:, :2]
     uv_direct = _uv_from_ndc(ndc_d[faces], 0, k)  # (F, 3, 2)
     face_uvs = uv_direct.copy()
     face_panel = np.zeros(nf, np.int8)

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from saucerfab.model.camera import Camera
+from saucerfab.model.footprint import design_vertices, direct_vertices
 from saucerfab.model.heightfield import make_grid, triangulate
 from saucerfab.model.scene import Scene
 
@@ -118,12 +119,16 @@ class ViewMeshes:
         size_d = image_size or scene.direct.image_size
         size_r = image_size or scene.reflected.image_size
         cam_d = Camera.from_scene(scene, "direct").with_size(size_d)
-        self.views: list[Any] = [
-            ViewMesh("direct", cam_d, xy, np.arange(nv), self.faces_np, np.arange(nf), identity=True)
-        ]
+        h_flat = np.asarray(heights, np.float64).reshape(-1)
+        #: (V,) bool: vertices that carry the design (a rectangle: all; a disc: on it, clear of the cup)
+        self.design_vertices = design_vertices(scene, xy)
+        if scene.saucer.is_disc:  # the disc's faces the eye sees as design, the cup hiding those behind it
+            seen = direct_vertices(scene, self.grid.vertices(h_flat))
+            self.views: list[Any] = [self._gather("direct", cam_d, seen)]
+        else:
+            self.views = [ViewMesh("direct", cam_d, xy, np.arange(nv), self.faces_np, np.arange(nf), identity=True)]
         pieces = reflect(scene, xy)
         self.pieces = pieces
-        h_flat = np.asarray(heights, np.float64).reshape(-1)
         groups: list[tuple[str, list]] = []
         if reflected_groups is None:
             groups.append(("reflected", pieces))
@@ -137,7 +142,7 @@ class ViewMeshes:
             xs, srcs, faces, fsrc, mirror = [], [], [], [], []
             offset = 0
             for piece in group:
-                ok = piece.valid(h_flat, scene.cup.height)
+                ok = piece.valid(h_flat, scene.cup.height) & self.design_vertices
                 face_ok = ok[self.faces_np].all(axis=1)
                 if not face_ok.any():
                     continue
@@ -168,6 +173,18 @@ class ViewMeshes:
         self.views = [self.as_view(v) for v in self.views]
         #: supersample -> (heights (V,), visibility) of the last :meth:`visible_faces` call
         self._visible_memo: dict[int, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
+
+    def _gather(self, name: str, camera: Camera, keep_vertices: np.ndarray) -> ViewMesh:
+        """The view of the faces whose three vertices are kept, seen in place (no mirror)."""
+        face_ok = keep_vertices[self.faces_np].all(axis=1)
+        keep = np.flatnonzero(keep_vertices)
+        remap = np.full(self.num_vertices, -1, np.int64)
+        remap[keep] = np.arange(keep.size)
+        return ViewMesh(name, camera, self.xy[keep], keep, remap[self.faces_np[face_ok]], np.flatnonzero(face_ok))
+
+    def design_faces(self) -> np.ndarray:
+        """(F,) bool: the grid's faces that carry the design (a rectangle: all; a disc: on it, clear of the cup)."""
+        return self.design_vertices[self.faces_np].all(axis=1)
 
     def visible_faces(self, heights: np.ndarray, supersample: int = 2) -> dict[str, np.ndarray]:
         """Per view, (F,) bool: saucer faces that cover a (super)sample of its picture (the rectangle of the

@@ -273,7 +273,7 @@ def test_the_named_scenes_and_the_default() -> None:
     from saucerfab.model.scene import DEFAULT_PRESET, PRESETS, WIDE_X_RANGE
     from saucerfab.optimize.request import DesignRequest
 
-    assert DEFAULT_PRESET == "paper" == DesignRequest.default("scene") and set(PRESETS) == {"paper", "wide"}
+    assert DEFAULT_PRESET == "paper" == DesignRequest.default("scene") and set(PRESETS) == {"paper", "wide", "round"}
     wide, paper = load_scene("wide"), load_scene("paper")
     assert wide.saucer.x_range == WIDE_X_RANGE and wide.saucer.size[0] * wide.mm_per_unit == pytest.approx(175.0)
     assert (wide.camera, wide.cup, wide.saucer.y_range) == (paper.camera, paper.cup, paper.saucer.y_range)
