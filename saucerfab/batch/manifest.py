@@ -28,12 +28,20 @@ TOML::
     formats = ["obj", "3mf"]
     design_options = { resolution = 40, image_size = 64, max_iters = 30 }
 
+    [[job]]
+    id = "round"                   # a round saucer, the cup at its centre
+    direct = "images/rose.png"
+    reflected = "images/cat.png"
+    scene = "round"
+    design_options = { saucer_diameter_mm = 180 }
+
 CSV: one header row, then one row per job; columns are the job keys
 (``id,design,direct,reflected,shape,scene,printer,cup_diameter_mm,formats,...``),
 an empty cell means "not given", ``formats`` lists names separated by
 spaces or ``;``, and ``design_options`` / ``export_options`` hold
 ``key=value`` pairs separated by ``;`` with TOML values
-(``resolution=40; max_iters=50; ablation="full"``). Lines starting with ``#``
+(``resolution=40; max_iters=50; ablation="full"``; a round saucer: ``scene`` ``round`` and
+``saucer_diameter_mm=180``). Lines starting with ``#``
 are comments.
 
 Paths are relative to the manifest's folder and must stay inside it (after
@@ -426,7 +434,8 @@ def _check_design_options(
     ``prepare`` does). A job with a scene *file* has its overrides checked on
     the paper preset's scene (the ranges do not depend on the scene) and
     its cup with the scene file when the job runs: the file is the job's
-    input, read when the job runs, not when the manifest loads.
+    input, read when the job runs, not when the manifest loads (so is a round
+    saucer's ``saucer_diameter_mm`` with it: only a disc takes one).
 
     Raises:
         ConfigError: ``unknown design option(s) [...]; allowed: [...]``, else
@@ -442,6 +451,10 @@ def _check_design_options(
         check_height_scale(request.height_scale)
     except SaucerfabError as exc:
         raise ConfigError(f"design_options: {exc}") from None
+    if scene is None:
+        # a scene file: its overrides are checked on the default scene, and a round saucer's diameter
+        # (only for a disc) with the file's own outline when the job runs
+        options = {k: v for k, v in options.items() if k != "saucer_diameter_mm"}
     scene, cup = (scene, cup) if scene is not None else (DesignRequest.default("scene"), None)
     try:
         key = json.dumps(options, sort_keys=True)

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from saucerfab.model.design import Design
+    from saucerfab.model.scene import Scene
     from saucerfab.optimize.looks import Look
 
 HELP = "optimize a saucer: direct + reflected image and a base shape -> design folder"
@@ -16,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options; every design option defaults to None ("not given") and its default is DesignRequest's."""
     from saucerfab.model.cups import CUP_SPEC_USAGE
     from saucerfab.model.eyes import DEFAULT_IPD_MM
-    from saucerfab.model.scene import paper_scene
+    from saucerfab.model.scene import PRESETS, paper_scene, round_scene
     from saucerfab.optimize.energies import WEIGHTS
     from saucerfab.optimize.request import (
         ABLATIONS,
@@ -32,13 +33,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     default = DesignRequest.default
     paper = paper_scene()  # the default scene's sizes
+    round_ = round_scene()  # the round saucer's
     p.add_argument("--direct", required=True, help="image seen directly on the saucer")
     p.add_argument("--reflected", required=True, help="image seen in the mirror cup")
     p.add_argument("--reflected2", help="second reflected image (needs --cup prism:N)")
     p.add_argument("--shape", help=f"base shape: built-in name or .png/.npy (default {default('shape')})")
     p.add_argument("--height-scale", type=float,
                    help=f"model units per unit of a shape file (default {default('height_scale')})")
-    p.add_argument("--scene", help=f"scene TOML or preset (default: {default('scene')})")
+    p.add_argument("--scene", help=f"scene TOML or preset: {', '.join(PRESETS)} (default: {default('scene')}; "
+                   "round: a round saucer with the cup at its centre)")
     p.add_argument("--cup", help=f"cup override: {CUP_SPEC_USAGE}")
     p.add_argument(
         "--printer",
@@ -51,6 +54,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         type=float,
         help="the real cup's width across its footprint in mm: the design's physical scale (default: the "
         f"scene's, {paper.cup_diameter_mm:g})",
+    )
+    p.add_argument(
+        "--saucer-diameter-mm",
+        type=float,
+        metavar="D",
+        help="a round saucer's diameter in mm (with --scene round; refused with a rectangle); its grid follows "
+        f"the diameter unless --resolution is given (default: the scene's, {_round_mm(round_):g} for the "
+        f"round scene's {round_.cup_diameter_mm:g} mm cup)",
     )
     p.add_argument("-o", "--out", required=True, help="design folder to write (an existing design needs --force)")
     p.add_argument("--force", action="store_true", help="replace the design already in --out")
@@ -168,6 +179,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="skip the quick verify of a trial export (for --printer, OBJ) that shows in the design's report.html",
     )
+
+
+def _round_mm(scene: Scene) -> float:
+    """A round scene's saucer diameter, mm (for the help text)."""
+    return 2.0 * scene.saucer.radius * scene.mm_per_unit
 
 
 def given_options(args: argparse.Namespace) -> dict[str, object]:

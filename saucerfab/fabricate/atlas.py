@@ -36,6 +36,10 @@ from saucerfab.fabricate.solid import Solid
 
 #: share of the page edge kept for the top region (the rest is the chart column)
 TOP_SHARE = 7 / 8
+#: the side charts' texel density at most this share of the top's: they carry plain colours, and a file
+#: checker takes faces under a tenth of the best density for plain (saucerfab.check.limits.Limits
+#: .solid_colour_density), which a round saucer's large bottom in the chart column would pass
+SIDE_DENSITY_SHARE = 0.05
 
 
 @dataclass(frozen=True)
@@ -146,7 +150,21 @@ def top_uv(layout: AtlasLayout, grid_x: np.ndarray, grid_y: np.ndarray, xy: np.n
     return np.stack([px / s, 1.0 - py / s], axis=1)
 
 
-def chart_uvs(vertices: np.ndarray, faces: np.ndarray, region: "Rect", size: int) -> tuple[np.ndarray, np.ndarray]:
+def _px_per_mm(vertices: np.ndarray, faces: np.ndarray, px: np.ndarray, corners: np.ndarray) -> float:
+    """Texels per mm over a triangle set: sqrt(page area in px^2 / surface area in mm^2).
+
+    Args: vertices (V, 3) mm; faces (F, 3) into them; px (T, 2) page pixels; corners (F, 3) into ``px``.
+    """
+    v = vertices[faces]
+    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1).sum()
+    p = px[corners]
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    page = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
+    return float(np.sqrt(page / area)) if area > 0 else 0.0
+
+
+def chart_uvs(vertices: np.ndarray, faces: np.ndarray, region: "Rect", size: int,
+              max_px_per_mm: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """xatlas charts for a (non-top) triangle set, placed in ``region``.
 
     Args:
@@ -154,6 +172,7 @@ def chart_uvs(vertices: np.ndarray, faces: np.ndarray, region: "Rect", size: int
         faces: (F, 3) indices into ``vertices``.
         region: where on the page the charts go.
         size: page edge, pixels.
+        max_px_per_mm: the charts are scaled down to at most this density (None: as large as the region allows).
 
     Returns:
         uvs (T, 2) page texture coordinates and corner indices (F, 3) into them.
@@ -177,10 +196,16 @@ def chart_uvs(vertices: np.ndarray, faces: np.ndarray, region: "Rect", size: int
     # xatlas's uv are in [0, 1] over its own (aw x ah) texel grid, v counting
     # from its first row; put that grid, uniformly scaled, at the region's top
     # left (first row at the top), so every chart stays inside the region.
-    px = region.x + np.asarray(uv[:, 0], np.float64) * aw * scale
-    py = region.y + np.asarray(uv[:, 1], np.float64) * ah * scale
+    corners = np.asarray(idx, np.int64).reshape(-1, 3)
+    unit = np.stack([np.asarray(uv[:, 0], np.float64) * aw, np.asarray(uv[:, 1], np.float64) * ah], axis=1)
+    if max_px_per_mm is not None:
+        density = _px_per_mm(vertices, faces, unit * scale, corners)
+        if density > max_px_per_mm:
+            scale *= max_px_per_mm / density
+    px = region.x + unit[:, 0] * scale
+    py = region.y + unit[:, 1] * scale
     uvs = np.stack([px / size, 1.0 - py / size], axis=1)
-    return uvs, np.asarray(idx, np.int64).reshape(-1, 3)
+    return uvs, corners
 
 
 def build_uvmap(solid: Solid, layout: AtlasLayout) -> UVMap:
@@ -197,7 +222,9 @@ def build_uvmap(solid: Solid, layout: AtlasLayout) -> UVMap:
     face_uvs[solid.is_top] = top_inv.reshape(-1, 3)
     rest = ~solid.is_top
     if rest.any():
-        uv_rest, idx_rest = chart_uvs(solid.vertices, f[rest], layout.charts, layout.size)
+        top_density = _px_per_mm(solid.vertices, top_f, uv_top * layout.size, top_inv.reshape(-1, 3))
+        uv_rest, idx_rest = chart_uvs(solid.vertices, f[rest], layout.charts, layout.size,
+                                      SIDE_DENSITY_SHARE * top_density)
         face_uvs[rest] = idx_rest + uv_top.shape[0]
         uvs = np.concatenate([uv_top, uv_rest])
     else:

@@ -31,7 +31,12 @@ import numpy as np
 
 from saucerfab.errors import ConfigError, SceneFileError
 from saucerfab.model.cups import CUP_CLASSES, Cup, cup_from_dict
-from saucerfab.model.scene import EXTENT_TOLERANCE, FULL_EXTENT, VIEW_NAMES
+from saucerfab.model.scene import (
+    EXTENT_TOLERANCE,
+    FULL_EXTENT,
+    SAUCER_OUTLINES,
+    VIEW_NAMES,
+)
 
 #: the schema ``scene.json`` is written in (and the only one read)
 SCHEMA = "saucerfab.scene/1"
@@ -41,6 +46,9 @@ UNITS = "mm"
 MAX_SCENE_JSON_BYTES = 1 << 20
 #: largest magnitude of any number read (mm, degrees, counts): far beyond a printable part
 MAX_ABS_VALUE = 1e7
+#: how far a round saucer's bounding square (``center`` +- ``diameter`` / 2) may lie from the footprint, mm
+#: (the writer rounds both to 1e-6 mm; the footprint's ends come from the grid, nanometres off)
+DISC_FOOTPRINT_TOLERANCE_MM = 1e-3
 #: the GLB node matrix (column major) when a file has none: the identity
 _IDENTITY_16 = [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
 
@@ -123,6 +131,10 @@ class PrintScene:
         glb_matrix: (4, 4) the GLB node's matrix (file frame in metres -> glTF's y-up).
         source: the parsed JSON object itself, every key as read (the 3D
             view embeds it as it is); checked, never to be changed.
+        saucer_outline: ``rectangle`` (the footprint is the saucer; also a file
+            without ``saucer.outline``, or without ``saucer``) or ``disc``.
+        saucer_center: a disc's centre (x, y), mm; None for a rectangle.
+        saucer_diameter: a disc's diameter, mm; None for a rectangle.
     """
 
     camera: tuple[float, float, float]
@@ -133,6 +145,14 @@ class PrintScene:
     mm_per_unit: float
     glb_matrix: np.ndarray
     source: Mapping[str, Any] = field(repr=False, compare=False)
+    saucer_outline: str = SAUCER_OUTLINES[0]
+    saucer_center: tuple[float, float] | None = None
+    saucer_diameter: float | None = None
+
+    @property
+    def is_disc(self) -> bool:
+        """Whether the saucer is round (its outline the circle ``saucer_center``, ``saucer_diameter``)."""
+        return self.saucer_outline == "disc"
 
 
 def _bad(where: str, what: str) -> SceneFileError:
@@ -209,6 +229,31 @@ def _cup(where: str, c: dict[str, Any]) -> CupSpec:
     return CupSpec(center, bottom_z, height, outline)  # type: ignore[arg-type]
 
 
+def _outline(
+    where: str, saucer: dict[str, Any], sx: tuple[float, ...], sy: tuple[float, ...]
+) -> tuple[str, tuple[float, ...] | None, float | None]:
+    """``saucer.outline`` and a disc's ``diameter`` and ``center``: a known outline, and a disc whose
+    bounding square is the footprint (``x_range``, ``y_range``)."""
+    outline = saucer.get("outline", SAUCER_OUTLINES[0])
+    if not isinstance(outline, str) or outline not in SAUCER_OUTLINES:
+        raise _bad(where, f"saucer.outline is {str(outline)[:20]!r}; known: {', '.join(SAUCER_OUTLINES)}")
+    if outline != "disc":
+        extra = [k for k in ("diameter", "center") if k in saucer]
+        if extra:
+            raise _bad(where, f"saucer.{extra[0]} is a round saucer's (saucer.outline \"disc\"), "
+                              f"but the outline is a {outline}")
+        return outline, None, None
+    diameter = _num(where, saucer.get("diameter"), "saucer.diameter", positive=True)
+    center = _vec(where, saucer.get("center"), 2, "saucer.center")
+    r = 0.5 * diameter
+    square = ((center[0] - r, center[0] + r), (center[1] - r, center[1] + r))
+    if max(abs(a - b) for got, want in zip(square, (sx, sy)) for a, b in zip(got, want)) > DISC_FOOTPRINT_TOLERANCE_MM:
+        raise _bad(where, f"the round saucer (saucer.center {list(center)}, saucer.diameter {diameter:g} mm) must "
+                          f"fill its footprint: its bounding square x {list(square[0])}, y {list(square[1])} is not "
+                          f"saucer.x_range {list(sx)}, y_range {list(sy)}")
+    return outline, center, diameter
+
+
 def scene_from_dict(d: Any, where: str, *, footprint: bool = True) -> PrintScene:
     """The one parse of a ``saucerfab.scene/1`` object (``json.loads`` of scene.json, or a viewing dict).
 
@@ -237,19 +282,23 @@ def scene_from_dict(d: Any, where: str, *, footprint: bool = True) -> PrintScene
     cup = _cup(where, _obj(where, d, "cup"))
     sx: tuple[float, ...] | None = None
     sy: tuple[float, ...] | None = None
+    outline: tuple[str, tuple[float, ...] | None, float | None] = (SAUCER_OUTLINES[0], None, None)
     if footprint or "saucer" in d:
         saucer = _obj(where, d, "saucer")
         sx = _vec(where, saucer.get("x_range"), 2, "saucer.x_range")
         sy = _vec(where, saucer.get("y_range"), 2, "saucer.y_range")
         if not (sx[0] < sx[1] and sy[0] < sy[1]):
             raise _bad(where, "saucer.x_range and y_range must be (min, max) with min < max")
+        outline = _outline(where, saucer, sx, sy)
     mpu = _num(where, d.get("mm_per_unit"), "mm_per_unit", positive=True)
     glb = d.get("glb") if isinstance(d.get("glb"), dict) else {}
     mat = glb.get("node_matrix_column_major", _IDENTITY_16)
     m = np.array(_vec(where, mat, 16, "glb.node_matrix_column_major"), np.float64).reshape(4, 4).T
     if abs(np.linalg.det(m[:3, :3])) < 1e-9:
         raise _bad(where, "glb.node_matrix_column_major is singular")
-    return PrintScene(camera, views, cup, sx, sy, mpu, m, MappingProxyType(d))  # type: ignore[arg-type]
+    shape, centre, diameter = outline
+    return PrintScene(camera, views, cup, sx, sy, mpu, m, MappingProxyType(d),  # type: ignore[arg-type]
+                      saucer_outline=shape, saucer_center=centre, saucer_diameter=diameter)
 
 
 def read_scene_file(path: Path) -> PrintScene:

@@ -25,7 +25,16 @@ model-to-file map is a uniform scale (mm per model unit) and a translation
 into the positive octant, so angles and the up vector are unchanged.
 
 Beyond those fields: ``mm_per_unit``, the saucer's footprint and the cup
-seat in file coordinates, and the GLB's node transform.
+seat in file coordinates, and the GLB's node transform. A round saucer's
+``saucer`` also holds its outline, so verify and any renderer rebuild it
+(a rectangle's has no such keys: its file reads as it did before discs)::
+
+     "saucer": {"x_range": [x0, x1], "y_range": [y0, y1],
+                "outline": "disc", "diameter": d, "center": [cx, cy]}
+
+``x_range`` and ``y_range`` are then the disc's bounding square (``center``
++- ``diameter`` / 2); the part's outline is a polygon whose vertices lie on
+that circle (:mod:`saucerfab.fabricate.round_solid`).
 
 The reader, beside this writer: :mod:`saucerfab.fabricate.scene_file`
 (:func:`~saucerfab.fabricate.scene_file.read_scene_file`, one typed
@@ -109,9 +118,13 @@ def scene_dict(scene: Scene, solid: Solid) -> dict[str, Any]:
     """The ``scene.json`` content for ``scene`` as written with ``solid``'s transform."""
     (x0, x1), (y0, y1) = solid.footprint
     seat = solid.seat
+    saucer: dict[str, Any] = {"x_range": [_r(x0), _r(x1)], "y_range": [_r(y0), _r(y1)]}
+    if solid.disc_radius_mm is not None:  # written for a disc only: a rectangle's scene.json stays as it was
+        saucer.update(outline="disc", diameter=_r(2.0 * solid.disc_radius_mm),
+                      center=[_r(c) for c in seat.center_xy])
     return {
         **viewing_dict(scene, solid.model_to_file),
-        "saucer": {"x_range": [_r(x0), _r(x1)], "y_range": [_r(y0), _r(y1)]},
+        "saucer": saucer,
         "seat": {
             "kind": seat.kind,
             "floor_z": _r(seat.floor_z),

@@ -16,6 +16,11 @@ footprint grown by the clearance. Two of its walls depend on the cup's size:
   profile's ``thin_policy``) and the design's preflight (refused before any
   work, naming that size).
 
+On a round saucer the seat is a pocket in the saucer itself
+(:mod:`saucerfab.fabricate.round_solid`): it has no wall against a second
+part, but it must stay inside the ring around the cup that holds no design
+(:func:`seat_ring_problem`).
+
 Lengths are model millimetres (model units times ``Scene.mm_per_unit``).
 """
 
@@ -27,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.model.scene import Scene
+from saucerfab.model.scene import CUP_RING_MM, Scene
 
 #: vertices of the seat's offset outlines closer than this to the line through
 #: their neighbours are dropped (``CrossSection.simplify``), mm
@@ -170,7 +175,9 @@ def seat_wall(scene: Scene, mm_per_unit: float, options: FabOptions, min_wall_mm
     counts a thin one among its problems) and the design's preflight
     (:func:`saucerfab.optimize.printable.preflight` refuses it before any work).
     """
-    if options.seat == "none":
+    if options.seat == "none" or scene.saucer.is_disc:
+        # a disc's seat is a pocket in the saucer itself, walled by its rim (FabOptions.seat_rim_mm, checked
+        # against the minimum wall with the solid's other walls): no gap between two parts to grow thin
         return None
     s = float(mm_per_unit)
     outline = cup_outline_mm(scene, s)
@@ -188,3 +195,27 @@ def seat_wall(scene: Scene, mm_per_unit: float, options: FabOptions, min_wall_mm
     need = min_wall_mm + options.seat_clearance_mm
     smallest = math.ceil(cup_mm * need / max(gap, 1e-9) - 1e-9)  # a scene's cup never touches its saucer
     return SeatWall(cup_mm, gap, gap - options.seat_clearance_mm, float(min_wall_mm), smallest)
+
+
+def seat_ring_problem(scene: Scene, options: FabOptions) -> str | None:
+    """On a round saucer: the seat reaches past the cup's ring and would cover the design; None when it fits.
+
+    The seat's outline is the cup's footprint grown by the clearance and the
+    rim (the clearance alone for ``seat = "none"``: a floor without a rim);
+    the ring around the footprint that holds no design is
+    :data:`saucerfab.model.scene.CUP_RING_MM` wide. A rectangle's seat stands
+    beside the saucer (None). One rule for the export (a problem, warned of
+    or refused per the profile) and the design's preflight (refused before
+    any work); the message names the options to change.
+    """
+    if not scene.saucer.is_disc:
+        return None
+    rim = options.seat_rim_mm if options.seat != "none" else 0.0
+    width = options.seat_clearance_mm + rim
+    if width <= CUP_RING_MM + 1e-9:
+        return None
+    what = (f"clearance and rim ({options.seat_clearance_mm:g} + {rim:g} = {width:g} mm)" if rim
+            else f"clearance ({width:g} mm)")
+    return (f"the cup seat's {what} reaches past the round saucer's {CUP_RING_MM:g} mm ring around the cup, "
+            "which holds no design: the seat would cover the design; lower --seat-rim-mm or --seat-clearance-mm "
+            f"so that the two add up to {CUP_RING_MM:g} mm or less")

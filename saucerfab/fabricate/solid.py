@@ -28,6 +28,12 @@ Construction, all with manifold3d so the result is a guaranteed oriented
 * union, difference; then manifold's status must be ``NoError`` *and* the
   volume positive (an inverted mesh also reports NoError).
 
+A round saucer (``Saucer.is_disc``) takes the same block, cut to the disc
+with its seat at the centre (:mod:`saucerfab.fabricate.round_solid`); its
+file frame puts the disc's bounding square, rather than the part's bounding
+box (the outline's chords lie up to ``round_solid.CHORD_MM`` inside it), at
+x = y = 0, so the disc's centre is at (radius, radius).
+
 Exact contact. The seat meets the block face to face, which manifold's
 symbolic perturbation joins cleanly *only if the faces coincide exactly*.
 The seat's outlines come from ``CrossSection`` (Clipper2), which rounds 2-D
@@ -56,12 +62,14 @@ import numpy as np
 
 from saucerfab.errors import MeshError
 from saucerfab.fabricate.options import FabOptions
+from saucerfab.fabricate.round_solid import disc_part
 from saucerfab.fabricate.seat import (
     OUTLINE_EPS_MM,
     clip_to_cup_side,
     cross_section,
     cup_outline_mm,
     facing_edge,
+    seat_ring_problem,
     seat_wall,
 )
 from saucerfab.model.design import Design
@@ -81,12 +89,14 @@ class SeatInfo:
 
     Attributes:
         kind: ``recess``, ``ring`` or ``none``.
-        center_xy: (2,) the cup axis.
+        center_xy: (2,) the cup axis (on a round saucer: the disc's centre).
         floor_z: z of the cup's standing plane (model z = 0).
         top_z: z of the plate top around the recess (recess), of the ring
-            top (ring), or ``floor_z`` (none).
+            top (ring), or ``floor_z`` (none); on a round saucer the rim's
+            top (recess and ring, the same part there) or ``floor_z`` (none).
         pocket: (K, 2) outline of the recess / ring inside (cup footprint
-            grown by the clearance), counter-clockwise; empty for ``none``.
+            grown by the clearance), counter-clockwise; empty for ``none``
+            (on a round saucer: the floor's outline for every kind).
     """
 
     kind: str
@@ -130,6 +140,8 @@ class Solid:
         seat: where the cup stands.
         features: thin crest report.
         warnings: human-readable warnings (thin walls/features under ``warn``).
+        disc_radius_mm: a round saucer's radius, mm (its centre is
+            ``seat.center_xy``); None for the rectangle.
     """
 
     vertices: np.ndarray
@@ -144,6 +156,7 @@ class Solid:
     seat: SeatInfo
     features: FeatureReport
     warnings: tuple[str, ...] = field(default=())
+    disc_radius_mm: float | None = None
 
     @property
     def bbox_mm(self) -> tuple[float, float, float]:
@@ -153,7 +166,7 @@ class Solid:
 
     @property
     def footprint(self) -> tuple[tuple[float, float], tuple[float, float]]:
-        """((x0, x1), (y0, y1)) of the saucer's top in file mm."""
+        """((x0, x1), (y0, y1)) of the saucer's top in file mm (a round saucer's: the disc's bounding square)."""
         return (
             (float(self.grid_x[0]), float(self.grid_x[-1])),
             (float(self.grid_y[0]), float(self.grid_y[-1])),
@@ -394,9 +407,15 @@ def build_solid(
     warnings: list[str] = []
     problems: list[str] = []
     features = FeatureReport(0, math.inf, None)
+    disc = design.scene.saucer.is_disc
+    ring = seat_ring_problem(design.scene, opts)  # a round saucer's seat over its design (None: fits)
+    if ring is not None and profile is None:
+        warnings.append(ring)
     if profile is not None:
         wall = profile.min_wall_mm
         problems.extend(opts.walls_under(wall))
+        if ring is not None:
+            problems.append(ring)
         sw = seat_wall(design.scene, s, opts, wall)
         if sw is not None and sw.thin:
             problems.append(f"{sw.problem()}: use --cup-diameter-mm {sw.smallest_cup_mm} or more, or --seat none")
@@ -443,7 +462,10 @@ def build_solid(
     kind = opts.seat
     top_z = 0.0
     pocket = np.zeros((0, 2))
-    if kind != "none":
+    if disc:
+        part = disc_part(block, design.scene, s, opts, z_bottom, float(hmm.max()))
+        solid, pocket, top_z = part.solid, part.pocket, part.top_z
+    elif kind != "none":
         cup_cs = cross_section(cup_outline)
         # Clipper's round joins can leave vertex pairs ~1e-8 mm apart; the hull keeps one
         # of a pair and the ring both, so the two outlines would differ by a sliver.
@@ -497,6 +519,8 @@ def build_solid(
 
     # Into the positive octant, then round once so every format writes the same numbers.
     shift = -v.min(axis=0)
+    if disc:  # the disc's bounding square from x = y = 0 (the polygon's chords lie inside it)
+        shift[0], shift[1] = -xs[0], -ys[0]
     dec = opts.coord_decimals
     v = np.round(v + shift, dec) + 0.0  # + 0.0 turns -0.0 into 0.0
     v, f, is_top = canonical_order(v, f, is_top)
@@ -517,7 +541,7 @@ def build_solid(
         top_z=float(shift[2] + top_z) if kind != "none" else float(shift[2]),
         pocket=pocket + shift[:2] if pocket.size else pocket,
     )
-    if kind == "none":
+    if kind == "none" and not disc:  # a disc's floor is in the part: the cup needs no support
         warnings.append(
             f"no cup seat: the cup must stand on a support {shift[2]:.2f} mm above the part's "
             "base plane so its bottom is where the design assumes"
@@ -535,6 +559,7 @@ def build_solid(
         seat=seat,
         features=features,
         warnings=tuple(warnings),
+        disc_radius_mm=design.scene.saucer.radius * s if disc else None,
     )
 
 

@@ -137,15 +137,38 @@ BASE_SHAPES: dict[str, Callable[[np.ndarray, np.ndarray, np.random.Generator], n
 }
 
 
-def base_shape(name: str, n: int, seed: int = 0) -> np.ndarray:
-    """A built-in base shape sampled on an n x n grid, heights (n, n) in model units."""
+#: the shapes whose ridges run across the line of sight (along x on a rectangle): around the cup on a disc
+AROUND_THE_CUP = ("waves", "tabula_scalata")
+
+
+def shape_coordinates(n: int, saucer: Saucer | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The (u, v) the built-in shapes take on an n x n grid, each (n, n).
+
+    A rectangle: [0, 1] across each side, whatever its size (the paper's).
+    A disc: model units from the cup's axis plus 0.5, so the shapes keep the
+    paper's ridge spacing in millimetres however large the disc (its 200 mm
+    would stretch a rectangle's six waves to twice their width and halve their
+    slopes, which part what the eye sees from what the cup sees) and the
+    round ones (ripples, bowl) stand centred on the cup.
+    """
+    if saucer is not None and saucer.is_disc:
+        return np.meshgrid(0.5 + np.linspace(*saucer.x_range, n), 0.5 + np.linspace(*saucer.y_range, n))
+    return np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+
+
+def base_shape(name: str, n: int, seed: int = 0, saucer: Saucer | None = None) -> np.ndarray:
+    """A built-in base shape sampled on an n x n grid of ``saucer`` (:func:`shape_coordinates`), heights (n, n) in model units."""
     key = name.replace("-", "_").lower()
     if key not in BASE_SHAPES:
         raise ShapeError(
             f"unknown base shape {name!r}; built-in shapes are {sorted(BASE_SHAPES)}, "
             "or give a .png or .npy heightfield file"
         )
-    u, v = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    u, v = shape_coordinates(n, saucer)
+    if key in AROUND_THE_CUP and saucer is not None and saucer.is_disc:
+        # ridges across the line of sight on a rectangle are rings around the cup on a disc: v grows
+        # towards the cup's axis (as a rectangle's v does towards the cup), so fronts face out, backs the cup
+        v = 1.0 - np.hypot(u - 0.5, v - 0.5)
     return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64)
 
 
@@ -296,7 +319,7 @@ def load_shape(
                 f"shape file {text!r} must be a .png or .npy heightfield; "
                 f"or name a built-in shape: {sorted(BASE_SHAPES)}"
             )
-        return base_shape(text, n, seed)
+        return base_shape(text, n, seed, saucer)
     if not path.is_file():
         raise ShapeError(f"shape file {text!r} not found")
     raw = _load_png(path) if path.suffix.lower() == ".png" else _load_npy(path)

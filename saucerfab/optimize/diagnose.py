@@ -218,7 +218,7 @@ def check_base_shape(prep: Prepared, rig: ViewMeshes, shape: str, seed: int = 0)
         own = None if is_file else name.replace("-", "_").lower()  # a built-in's key (as base_shape reads it)
         for other in ACROSS_VIEW_SHAPES:
             if other != own:
-                h = base_shape(other, n, seed)
+                h = base_shape(other, n, seed, rig.scene.saucer)
                 meshes = ViewMeshes(prep.scene, h, reflected_groups=prep.reflected_groups)
                 check.builtins[other] = _base_conflict(meshes, h)
         if check.suspect:

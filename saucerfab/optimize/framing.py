@@ -221,8 +221,9 @@ def fit_frames(
     return replace(
         scene,
         direct=direct,
-        reflected=refit_frame(cam_r, region(groups[0]), mode, a_r, axis),
-        reflected2=refit_frame(cam_r, region(groups[1]), mode, aspects.get("reflected2", 1.0), axis),
+        # two reflections, each in its own facets' region to one side of the axis: not centred on it
+        reflected=refit_frame(cam_r, region(groups[0]), mode, a_r),
+        reflected2=refit_frame(cam_r, region(groups[1]), mode, aspects.get("reflected2", 1.0)),
     )
 
 

@@ -601,6 +601,8 @@ def _parameters(
         # the design eye alone (the paper): the folder as before --eyes existed, byte for byte
         d.pop("eyes", None)
         d.pop("ipd_mm", None)
+    if d.get("saucer_diameter_mm") is None:  # a rectangle's (or the round preset's own) folder as before the option
+        d.pop("saucer_diameter_mm", None)
     for k, v in list(d.items()):
         if isinstance(v, Path):
             d[k] = v.name

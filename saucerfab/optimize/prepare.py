@@ -1,6 +1,7 @@
 """The validated inputs of a design run: ``prepare`` reads and checks every input before any work.
 
-* :func:`build_scene`: the request's scene with its overrides (cup, size, resolution);
+* :func:`build_scene`: the request's scene with its overrides (cup, size, a round saucer's
+  diameter, resolution);
 * :func:`prepare`: the base shape, the fitted pictures (at the render and the
   texture size), their masks and enhanced targets, the printer target and
   the prism placement, as a :class:`Prepared`, so bad input stops at once
@@ -19,7 +20,7 @@ import numpy as np
 from saucerfab.errors import ConfigError, MaskError
 from saucerfab.files.fileio import sha256_file
 from saucerfab.model.cups import parse_cup_spec
-from saucerfab.model.scene import VIEW_NAMES, Scene, load_scene
+from saucerfab.model.scene import VIEW_NAMES, Scene, disc_saucer, load_scene, round_grid
 from saucerfab.optimize.printable import PrintTarget, preflight, print_target
 from saucerfab.optimize.request import DesignRequest
 
@@ -63,12 +64,20 @@ class Prepared:
 
 
 def build_scene(request: DesignRequest) -> Scene:
-    """The request's scene with its cup, cup diameter, resolution and image-size overrides."""
+    """The request's scene with its cup, cup diameter, saucer diameter, resolution and image-size overrides.
+
+    Raises:
+        ConfigError: a saucer diameter for a scene whose saucer is not a disc; a bad override.
+        GeometryError: the cup does not fit the saucer (a disc too small: the message names the smallest).
+    """
     scene = load_scene(request.scene)
-    if request.cup:
-        scene = replace(scene, cup=parse_cup_spec(request.cup))
-    if request.cup_diameter_mm is not None:
-        scene = scene.with_changes(cup_diameter_mm=float(request.cup_diameter_mm))
+    if request.saucer_diameter_mm is not None:
+        scene = _round_saucer(scene, request)
+    else:
+        if request.cup:
+            scene = replace(scene, cup=parse_cup_spec(request.cup))
+        if request.cup_diameter_mm is not None:
+            scene = scene.with_changes(cup_diameter_mm=float(request.cup_diameter_mm))
     if request.resolution is not None:
         scene = replace(scene, saucer=replace(scene.saucer, resolution=int(request.resolution)))
     if request.image_size is not None:
@@ -79,6 +88,25 @@ def build_scene(request: DesignRequest) -> Scene:
             reflected=replace(scene.reflected, image_size=s),
         )
     return scene
+
+
+def _round_saucer(scene: Scene, request: DesignRequest) -> Scene:
+    """``scene`` with the request's cup and cup diameter and its disc rebuilt ``saucer_diameter_mm`` across.
+
+    One step, not three: a scene with the preset's disc around the request's cup could be refused
+    before the disc the request asks for is in place. The disc's grid is
+    :func:`~saucerfab.model.scene.round_grid`'s (``build_scene`` lays a given resolution over it).
+    """
+    if not scene.saucer.is_disc:
+        raise ConfigError(
+            f"--saucer-diameter-mm is for a round saucer: add --scene round (the scene {str(request.scene)!r} "
+            "has a rectangle saucer)"
+        )
+    cup = parse_cup_spec(request.cup) if request.cup else scene.cup
+    cup_mm = scene.cup_diameter_mm if request.cup_diameter_mm is None else float(request.cup_diameter_mm)
+    diameter = float(request.saucer_diameter_mm) * cup.width_units / cup_mm  # mm -> model units at this scale
+    saucer = disc_saucer(diameter, round_grid(diameter), scene.saucer.delta)
+    return replace(scene, cup=cup, cup_diameter_mm=cup_mm, saucer=saucer)
 
 
 def prepare(request: DesignRequest) -> Prepared:

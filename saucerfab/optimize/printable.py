@@ -5,7 +5,9 @@ unit is ``Scene.mm_per_unit`` mm) and its printer (a profile from
 :mod:`saucerfab.model.profiles`, the J55 unless asked otherwise). Before
 any optimization :func:`preflight` refuses what cannot be printed whatever
 the optimizer does (a part larger than the build volume at the worst heights
-the height bound allows, seat or base walls under the printer's minimum wall -
+the height bound allows - a round saucer wider than the build area naming the
+largest diameter that fits -, a round saucer's seat wider than the ring around
+the cup that holds no design, seat or base walls under the printer's minimum wall -
 the seat's wall against the saucer by the export's own rule,
 :func:`saucerfab.fabricate.seat.seat_wall`, naming the smallest cup that works -
 a base shape whose crests cannot be made printable inside the bound), each
@@ -24,7 +26,7 @@ import numpy as np
 
 from saucerfab.errors import ConfigError
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.fabricate.seat import seat_wall
+from saucerfab.fabricate.seat import seat_ring_problem, seat_wall
 from saucerfab.model.heightfield import make_grid
 from saucerfab.model.profiles import DEFAULT_PRINTER, PrinterProfile, load_profile
 from saucerfab.model.relief import OPTIMIZER_TIGHTEN, blunt_thin_crests
@@ -106,16 +108,24 @@ def worst_case_bbox_mm(scene: Scene, base: np.ndarray, options: FabOptions) -> t
     cup's footprint grown by the clearance and the rim; the base lies
     ``base_thickness_mm`` under the cup's standing plane and at least
     ``min_thickness_mm`` under the saucer's lowest point (as
-    :func:`saucerfab.fabricate.solid.build_solid` builds it).
+    :func:`saucerfab.fabricate.solid.build_solid` builds it). A round
+    saucer's part is its disc (the seat lies inside it), its top at least
+    the seat's floor (z = 0) when it has no rim.
     """
     s = scene.mm_per_unit
     sc = scene.saucer
-    r = scene.cup.circumradius * s + (options.seat_clearance_mm + options.seat_rim_mm if options.seat != "none" else 0.0)
-    x0, x1 = min(sc.x_range[0] * s, -r), max(sc.x_range[1] * s, r)
-    y0, y1 = min(sc.y_range[0] * s, -r), max(sc.y_range[1] * s, r)
+    if sc.is_disc:  # the disc's bounding square: the cylinder trims whatever of the seat reaches past it
+        (x0, x1), (y0, y1) = (sc.x_range[0] * s, sc.x_range[1] * s), (sc.y_range[0] * s, sc.y_range[1] * s)
+    else:
+        seat = options.seat_clearance_mm + options.seat_rim_mm if options.seat != "none" else 0.0
+        r = scene.cup.circumradius * s + seat
+        x0, x1 = min(sc.x_range[0] * s, -r), max(sc.x_range[1] * s, r)
+        y0, y1 = min(sc.y_range[0] * s, -r), max(sc.y_range[1] * s, r)
     top = (float(base.max()) + sc.delta) * s
     if options.seat != "none":
         top = max(top, options.seat_depth_mm)
+    elif sc.is_disc:
+        top = max(top, 0.0)  # the cup's floor
     bottom = min(-options.base_thickness_mm, (float(base.min()) - sc.delta) * s - options.min_thickness_mm)
     return (x1 - x0, y1 - y0, top - bottom)
 
@@ -133,15 +143,25 @@ def preflight(target: PrintTarget, scene: Scene, base: np.ndarray, options: FabO
         notes for the user (nothing that stops the design).
 
     Raises:
-        ConfigError: the part cannot fit the build volume, a wall is under the
-            printer's minimum (the seat's against the saucer: naming the
-            smallest cup size that works), or the base shape's crests cannot
-            be made as wide as the minimum feature inside the height bound;
-            the message names the fix.
+        ConfigError: the part cannot fit the build volume (a round saucer
+            wider than the build area: naming the largest diameter that
+            fits), a wall is under the printer's minimum (the seat's against
+            the saucer: naming the smallest cup size that works), a round
+            saucer's seat options would cover its design, or the base shape's
+            crests cannot be made as wide as the minimum feature inside the
+            height bound; the message names the fix.
     """
     opts = options or FabOptions()
     p = target.profile
     bbox = worst_case_bbox_mm(scene, base, opts)
+    if scene.saucer.is_disc and not p.fits((bbox[0], bbox[1], 0.0)):
+        # the disc's bounding square must fit the build area: its side is the diameter
+        largest = math.floor(min(p.build_volume_mm[:2]) + 1e-9)
+        bx, by = p.build_volume_mm[:2]
+        raise ConfigError(
+            f"the round saucer is {bbox[0]:.0f} mm across, larger than {p.name}'s build area {bx:g} x {by:g} mm; "
+            f"use --saucer-diameter-mm {largest} or less, or another --printer"
+        )
     if not p.fits(bbox):
         # the largest cup that fits, in 1 % steps of the cup asked for
         ratio = 1.0
@@ -159,6 +179,9 @@ def preflight(target: PrintTarget, scene: Scene, base: np.ndarray, options: FabO
     thin = opts.walls_under(p.min_wall_mm)
     if thin:
         raise ConfigError(f"for {p.name}: {'; '.join(thin)}; raise it in the export options")
+    ring = seat_ring_problem(scene, opts)  # a round saucer's seat stands in the ring round the cup
+    if ring is not None:
+        raise ConfigError(ring)
     # the seat's wall against the saucer grows with the cup: the export's own rule (it counts a thin
     # one among its problems), so a design is never made at a size its export would call too thin
     seat = seat_wall(scene, target.mm_per_unit, opts, p.min_wall_mm)

@@ -143,6 +143,14 @@ class DesignRequest(_Weights):
             part cannot fit its build volume (:mod:`saucerfab.optimize.printable`).
         cup_diameter_mm: the real cup's width across its footprint, mm (None:
             the scene's, 80); sets the design's physical scale.
+        saucer_diameter_mm: a round saucer's diameter, mm (None: the scene's; the ``round``
+            preset's is :data:`saucerfab.model.scene.ROUND_DIAMETER_PER_CUP` times the cup's
+            width). The scene's disc is rebuilt at that diameter
+            (:func:`saucerfab.model.scene.disc_saucer`), its grid from
+            :func:`~saucerfab.model.scene.round_grid` unless ``resolution`` is given. Only for a
+            scene whose saucer is a disc: with a rectangle it is refused, as is a disc too small
+            for the cup (the scene's own message names the smallest), when the scene is built
+            (:func:`saucerfab.optimize.prepare.build_scene`, before any work).
         prism_placement: with a second reflected image, "auto" turns the
             prism to the placement whose facet regions overlap least
             (:func:`saucerfab.optimize.regions.best_placement`); "as_given"
@@ -196,6 +204,7 @@ class DesignRequest(_Weights):
     eyes: str = "design"
     ipd_mm: float | None = None
     surround_weight: float | None = None
+    saucer_diameter_mm: float | None = None
 
     def eye_spec(self) -> EyeSpec:
         """The eyes the design is made for (:attr:`eyes`, :attr:`ipd_mm`), as verify takes them."""
@@ -249,6 +258,9 @@ class DesignRequest(_Weights):
         v = self.cup_diameter_mm
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0):
             raise ConfigError(f"cup_diameter_mm must be a positive number of millimetres, got {v!r}")
+        v = self.saucer_diameter_mm
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0):
+            raise ConfigError(f"saucer_diameter_mm must be a positive number of millimetres, got {v!r}")
         if not isinstance(self.printer, str) or not self.printer:
             raise ConfigError(f"printer must be a profile name such as 'j55' or a .toml path, got {self.printer!r}")
         if not isinstance(self.eyes, str):

@@ -53,6 +53,30 @@ FIT_RULES = {
     "crop": "cut to its content (what differs from its background); the frame takes that shape",
 }
 
+#: what each scene preset is, in the page's words (its saucer's size follows the cup's diameter)
+SCENE_LABELS = {
+    "paper": "Rectangle in front of the cup (the paper's)",
+    "wide": "Wide rectangle in front of the cup",
+    "round": "Round saucer, cup at the centre",
+}
+
+
+def scene_choices() -> list[dict[str, Any]]:
+    """The scene presets for the page: key, label, whether the saucer is round, and a round one's
+    diameter over the cup's diameter (what a form left empty gets: the page shows it for the cup given)."""
+    from saucerfab.model.scene import PRESETS
+
+    if set(SCENE_LABELS) != set(PRESETS):  # a new preset needs its words here
+        raise RuntimeError(f"SCENE_LABELS covers {sorted(SCENE_LABELS)} but the presets are {sorted(PRESETS)}")
+    out = []
+    for key, factory in PRESETS.items():
+        scene = factory()
+        entry: dict[str, Any] = {"key": key, "label": SCENE_LABELS[key], "round": scene.saucer.is_disc}
+        if scene.saucer.is_disc:
+            entry["saucer_per_cup"] = 2.0 * scene.saucer.radius / scene.cup_width_units
+        out.append(entry)
+    return out
+
 
 def option_choices() -> dict[str, Any]:
     """What ``GET /api/options`` answers (less the limits and samples, which the app adds)."""
@@ -71,6 +95,7 @@ def option_choices() -> dict[str, Any]:
     return {
         "shapes": sorted(BASE_SHAPES),
         "cups": [{"kind": k, "usage": cls.spec_usage} for k, cls in CUP_CLASSES.items()],
+        "scenes": scene_choices(),
         "printers": [{"key": k, "name": p.name} for k, p in sorted(list_profiles().items())],
         "fits": list(FITS),
         "fit_rules": dict(FIT_RULES),
@@ -80,6 +105,7 @@ def option_choices() -> dict[str, Any]:
         "stage_caps": dict(STAGE_CAPS),
         "defaults": {
             "printer": default("printer"),
+            "scene": default("scene"),
             "cup_diameter_mm": paper.cup_diameter_mm,
             "resolution": paper.saucer.resolution,
             "image_size": paper.direct.image_size,

@@ -34,6 +34,7 @@ export class DesignForm {
     const shapes = (o.shapes ?? []).map((s) => [s, s.replace(/_/g, " ")]);
     shapes.push([UPLOADED_SHAPE, "My heightfield (upload)…"]);
     setChoices($("#shape"), shapes);
+    setChoices($("#scene"), sceneList(o.scenes).map((sc) => [sc.key, sc.label]));
     setChoices($("#cup-kind"), cupList(o.cups).map((c) => [c.kind, c.kind]));
     setChoices($("#printer"), (o.printers ?? []).map((p) => [p.key, p.name ? `${p.name} (${p.key})` : p.key]));
     setChoices($("#frames"), (o.frames ?? ["inscribed"]).map((f) => [f, f]));
@@ -57,6 +58,8 @@ export class DesignForm {
     $("#fit").value = d.fit ?? "pad";
     $("#background-auto").checked = true;
     $("#background").disabled = true;
+    $("#scene").value = d.scene ?? sceneList(this.options.scenes)[0].key;
+    $("#saucer-diameter").value = "";
     $("#shape").value = d.shape ?? "waves";
     $("#cup-kind").value = cupList(this.options.cups)[0]?.kind ?? "circle";
     $("#cup-params").value = "";
@@ -107,6 +110,8 @@ export class DesignForm {
     });
     $("#shape").addEventListener("change", () => this.syncDependent());
     $("#cup-kind").addEventListener("change", () => this.syncDependent());
+    $("#scene").addEventListener("change", () => this.syncDependent());
+    $("#cup-diameter").addEventListener("input", () => this.syncDependent());
     $("#load-samples").addEventListener("click", () => this.loadSamples());
     $("#duplicate-clear").addEventListener("click", () => this.reset());
   }
@@ -120,10 +125,22 @@ export class DesignForm {
     $("#cup-usage").textContent = cup?.usage
       ? `Numbers as in ${cup.usage} (model units, degrees); empty for the defaults.`
       : "";
+    // a round saucer's diameter: asked for a round scene only; empty, the scene's (a multiple of the cup's)
+    const scene = this.scene();
+    $("#saucer-diameter-box").hidden = !scene?.round;
+    const cupMm = Number($("#cup-diameter").value);
+    $("#saucer-diameter").placeholder = scene?.round && scene.saucer_per_cup && cupMm > 0
+      ? `${+(scene.saucer_per_cup * cupMm).toFixed(1)} (${+scene.saucer_per_cup.toFixed(2)} × the cup)`
+      : "the scene's";
     const prism = $("#cup-kind").value === "prism";
     $("#zone-reflected2").hidden = !prism;
     $("#mask-reflected2").hidden = !prism;
     this.el.querySelector(".pictures").classList.toggle("three", prism);
+  }
+
+  /** The chosen scene's entry of /api/options (key, label, round, saucer_per_cup). */
+  scene() {
+    return sceneList(this.options.scenes).find((sc) => sc.key === $("#scene").value);
   }
 
   // ---- uploads and previews --------------------------------------------------------
@@ -255,6 +272,10 @@ export class DesignForm {
     const nums = $("#cup-params").value.trim().replace(/\s+/g, "");
     const firstKind = cupList(this.options.cups)[0]?.kind;
     opts.cup = kind === firstKind && !nums ? null : nums ? `${kind}:${nums}` : kind;
+    // the default scene is "no scene option" (a run's options as before there was a choice)
+    const scenes = sceneList(this.options.scenes);
+    const defaultScene = this.options.defaults?.scene ?? scenes[0].key;
+    opts.scene = $("#scene").value === defaultScene ? null : $("#scene").value;
     const numbers = { cup_diameter_mm: "#cup-diameter", resolution: "#resolution", image_size: "#image-size", max_iters: "#max-iters", seed: "#seed" };
     for (const [key, sel] of Object.entries(numbers)) {
       const text = $(sel).value.trim();
@@ -262,6 +283,12 @@ export class DesignForm {
       const n = Number(text);
       if (!Number.isFinite(n)) throw new Error(`${$(`label[for="${sel.slice(1)}"]`).textContent} must be a number`);
       opts[key] = n;
+    }
+    const saucer = $("#saucer-diameter").value.trim();
+    if (this.scene()?.round && saucer !== "") {
+      const n = Number(saucer);
+      if (!Number.isFinite(n)) throw new Error("Saucer diameter (mm) must be a number");
+      opts.saucer_diameter_mm = n;
     }
     return opts;
   }
@@ -294,6 +321,8 @@ export class DesignForm {
       $("#cup-kind").value = kind;
       $("#cup-params").value = nums;
     }
+    if (sceneList(this.options.scenes).some((sc) => sc.key === o.scene)) $("#scene").value = o.scene;
+    set("#saucer-diameter", o.saucer_diameter_mm);
     set("#printer", o.printer);
     set("#cup-diameter", o.cup_diameter_mm);
     set("#resolution", o.resolution);
@@ -337,6 +366,12 @@ function cupList(cups) {
   if (!cups) return [{ kind: "circle", usage: "" }];
   if (Array.isArray(cups)) return cups.map((c) => (typeof c === "string" ? { kind: c, usage: "" } : { kind: c.kind ?? c.name, usage: c.usage ?? c.spec_usage ?? "" }));
   return Object.entries(cups).map(([kind, usage]) => ({ kind, usage: typeof usage === "string" ? usage : usage?.usage ?? "" }));
+}
+
+/** `scenes` from /api/options as a list of {key, label, round, saucer_per_cup}; the paper's alone without it. */
+function sceneList(scenes) {
+  if (!Array.isArray(scenes) || !scenes.length) return [{ key: "paper", label: "Rectangle in front of the cup", round: false }];
+  return scenes.map((sc) => (typeof sc === "string" ? { key: sc, label: sc, round: false } : sc));
 }
 
 function setChoices(select, pairs) {

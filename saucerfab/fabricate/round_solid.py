@@ -1,0 +1,168 @@
+"""The round saucer's part: the heightfield block cut to a disc, with the cup's seat at its centre.
+
+A disc saucer (:attr:`saucerfab.model.scene.Saucer.is_disc`) is the circle
+inscribed in the square heightfield grid, centred on the cup's axis (model
+x = y = 0). :func:`saucerfab.fabricate.solid.build_solid` builds the same
+block as for the rectangle (the N x N top, four walls, a flat bottom) and
+hands it to :func:`disc_part`, which makes, all in model millimetres and all
+with manifold3d::
+
+    ((block + seat) - pocket) ^ cylinder
+
+* the *cylinder*: a prism over the disc's outline, a regular polygon whose
+  vertices lie on the circle of the saucer's radius and whose chords stray
+  from it by at most :data:`CHORD_MM` (the segment count comes from that
+  error, as :func:`saucerfab.fabricate.seat.cup_outline_mm` chooses the
+  cup's). The polygon is turned half a segment so no vertex lies on the
+  square's walls (the disc touches them at four points): the cylinder then
+  lies strictly inside the block's square, so its walls never meet the
+  block's walls face to face. It reaches below the bottom and above the top,
+  so the part's bottom and top stay the block's: the top faces are the
+  heightfield's faces that survive (their face ids pass through the booleans,
+  as for the rectangle) and the cylinder's wall is a side.
+* the *seat* (``FabOptions.seat``), at the centre, inside the scene's cup
+  ring (:data:`saucerfab.model.scene.CUP_RING_MM`, which holds no design;
+  :func:`saucerfab.fabricate.seat.seat_ring_problem` lists options wider than
+  it):
+
+  - ``recess`` (the default): a pocket of the cup's footprint grown by
+    ``seat_clearance_mm``, its floor exactly the cup's standing plane (model
+    z = 0), walled by a rim ``seat_rim_mm`` wide whose top is
+    ``seat_depth_mm`` above the floor; where the relief around is higher
+    than the rim, the relief is the pocket's wall.
+  - ``ring``: on a disc the same part as ``recess``. The rectangle's two
+    kinds differ in what stands on its plate (a pocket sunk into it, or a
+    ring raised from it); on a disc there is no plate, only the saucer
+    itself, and a pocket walled by a rim *is* a ring standing round the
+    cup's floor. ``scene.json`` and ``export.json`` record the kind asked for.
+  - ``none``: the pocket's flat floor at z = 0 (the cup's footprint grown by
+    the clearance) without the raised rim; where the relief around is higher
+    than the floor it still walls it. Unlike the rectangle's ``none`` the cup
+    needs no support (its floor is in the part, at the height the design
+    assumes), so there is no warning.
+
+  The seat's solid (the grown outline from just above the part's bottom up
+  to the rim's top, or to the floor for ``none``) starts inside the block's
+  material (:func:`seat_base_z`), so no face of it lies on the bottom.
+
+Nothing here depends on the rectangle's exact-contact machinery
+(:func:`saucerfab.fabricate.solid.footprint_on_clipper_grid`): no face of
+the seat or the cylinder meets a face of the block face to face.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from saucerfab.fabricate.options import FabOptions
+from saucerfab.fabricate.seat import OUTLINE_EPS_MM, cross_section, cup_outline_mm
+from saucerfab.model.scene import Scene
+
+#: the largest distance between the disc's outline polygon and its circle (the chords' sagitta), mm
+CHORD_MM = 0.01
+#: how far the cylinder and the pocket's cut reach past the part's bottom and top, mm (any positive length)
+OVERSHOOT_MM = 1.0
+
+
+def disc_segments(radius_mm: float, chord_mm: float = CHORD_MM) -> int:
+    """Sides of a regular polygon inscribed in a circle of ``radius_mm`` whose chords stray at most ``chord_mm``.
+
+    The sagitta of a side is ``r (1 - cos(pi / n))``; ``n`` is rounded up to a
+    multiple of 4 so the outline (and the part's bounding box) is the same
+    along x and y.
+    """
+    r = float(radius_mm)
+    n = math.ceil(math.pi / math.acos(max(1.0 - chord_mm / r, -1.0)))
+    return max(16, 4 * math.ceil(n / 4))
+
+
+def disc_outline_mm(radius_mm: float, chord_mm: float = CHORD_MM) -> np.ndarray:
+    """The disc's outline about its centre, (n, 2) mm, counter-clockwise, every vertex at ``radius_mm``.
+
+    Vertex k is at angle ``(k + 1/2) 2 pi / n``: half a segment off the axes,
+    so the polygon lies strictly inside the square ``[-r, r]^2`` (by
+    ``r (1 - cos(pi / n))``, at most ``chord_mm``) and never touches the
+    heightfield block's walls.
+    """
+    n = disc_segments(radius_mm, chord_mm)
+    a = (np.arange(n) + 0.5) * (2.0 * np.pi / n)
+    return float(radius_mm) * np.stack([np.cos(a), np.sin(a)], axis=1)
+
+
+def seat_base_z(z_bottom: float, options: FabOptions) -> float:
+    """Where the seat's solid starts, model mm: inside the block's material everywhere, below z = 0.
+
+    The block is solid from ``z_bottom`` up to its top, which lies at least
+    ``min_thickness_mm`` above ``z_bottom``; ``z_bottom`` itself is at most
+    ``-base_thickness_mm``. Half the smaller of the two above the bottom is
+    therefore under the top everywhere and under the cup's standing plane,
+    and off the bottom's plane (no coplanar faces to join).
+    """
+    return z_bottom + 0.5 * min(options.base_thickness_mm, options.min_thickness_mm)
+
+
+@dataclass(frozen=True)
+class DiscPart:
+    """What :func:`disc_part` built.
+
+    Attributes:
+        solid: the part (a lazy manifold3d ``Manifold``), model mm.
+        pocket: (K, 2) the seat's pocket outline (the cup's footprint grown by
+            the clearance), model mm, counter-clockwise.
+        top_z: the rim's top over the cup's standing plane, mm
+            (``seat_depth_mm``; 0 for ``none``).
+        segments: sides of the disc's outline polygon.
+    """
+
+    solid: object
+    pocket: np.ndarray
+    top_z: float
+    segments: int
+
+
+def disc_part(block: object, scene: Scene, mm_per_unit: float, options: FabOptions, z_bottom: float,
+              z_top: float) -> DiscPart:
+    """The round part from the heightfield ``block`` (a manifold3d ``Manifold``, model mm).
+
+    Args:
+        block: the saucer block over the square grid, model mm.
+        scene: the design's scene (a disc saucer, the cup at its centre).
+        mm_per_unit: millimetres per model unit.
+        options: the seat's kind and sizes.
+        z_bottom: the block's flat bottom, model mm (below 0).
+        z_top: the block's highest point, model mm.
+    """
+    import manifold3d as m3d
+
+    s = float(mm_per_unit)
+    radius = scene.saucer.radius * s
+    outline = disc_outline_mm(radius)
+    high = max(z_top, options.seat_depth_mm) + OVERSHOOT_MM
+    low = z_bottom - OVERSHOOT_MM
+    cylinder = m3d.Manifold.extrude(cross_section(outline), high - low).translate((0.0, 0.0, low))
+
+    cup_cs = cross_section(cup_outline_mm(scene, s))
+    # Clipper's round joins can leave vertex pairs ~1e-8 mm apart; simplify() drops them
+    inner = (
+        cup_cs.offset(options.seat_clearance_mm, m3d.JoinType.Round).simplify(OUTLINE_EPS_MM)
+        if options.seat_clearance_mm > 0
+        else cup_cs
+    )
+    base = seat_base_z(z_bottom, options)
+    if options.seat == "none":
+        seat_cs, seat_top = inner, 0.0  # the floor alone: its top is the pocket's floor
+    else:
+        seat_cs = cup_cs.offset(options.seat_clearance_mm + options.seat_rim_mm, m3d.JoinType.Round).simplify(
+            OUTLINE_EPS_MM
+        )
+        seat_top = options.seat_depth_mm
+    seat = m3d.Manifold.extrude(seat_cs, seat_top - base).translate((0.0, 0.0, base))
+    cut = m3d.Manifold.extrude(inner, high)  # from the standing plane z = 0 up
+    # the cylinder last: it trims a seat wider than the disc too (seat_ring_problem lists that)
+    solid = (m3d.Manifold.batch_boolean([block, seat], m3d.OpType.Add) - cut) ^ cylinder
+    polys = inner.to_polygons()
+    pocket = np.asarray(max(polys, key=len), np.float64) if polys else np.zeros((0, 2))
+    return DiscPart(solid=solid, pocket=pocket, top_z=float(seat_top), segments=int(outline.shape[0]))
