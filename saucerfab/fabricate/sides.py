@@ -33,6 +33,7 @@ import numpy as np
 from saucerfab.fabricate.atlas import UVMap
 from saucerfab.fabricate.solid import Solid
 from saucerfab.model.camera import Camera
+from saucerfab.model.footprint import hidden_by_cup
 from saucerfab.model.scene import Scene
 from saucerfab.render.texels import raster_triangles_2d
 
@@ -40,8 +41,6 @@ from saucerfab.render.texels import raster_triangles_2d
 AREA_STEP = 1e-3
 #: samples per side of the part's footprint when weighing the two surrounds (:func:`surround_sizes`)
 BALANCE_SAMPLES = 96
-#: samples along a line of sight when testing whether the cup hides a point (:func:`hidden_by_cup`)
-SIGHT_SAMPLES = 48
 
 #: texels of the gutter beside a painted chart texel painted too (bilinear filtering reaches one)
 GUTTER_TEXELS = 2
@@ -59,24 +58,6 @@ def _image_area(cam: Camera, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.
     pa, pb, pc = (cam.project(x)[:, :2] for x in (a, b, c))
     u, v = pb - pa, pc - pa
     return np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
-
-
-def hidden_by_cup(scene: Scene, points: np.ndarray, samples: int = SIGHT_SAMPLES) -> np.ndarray:
-    """(P,) bool: the cup stands between the design eye and these points (model units).
-
-    The line of sight is sampled ``samples`` times; a sample inside the cup's
-    footprint below its rim is a hit (the cup is a closed body to the eye).
-    """
-    pts = np.asarray(points, np.float64)
-    eye = np.asarray(scene.camera, np.float64)
-    out = np.zeros(pts.shape[0], bool)
-    for t in (np.arange(samples) + 0.5) / samples:
-        q = pts + t * (eye - pts)
-        low = q[:, 2] <= scene.cup.height
-        if low.any():
-            idx = np.flatnonzero(low & ~out)
-            out[idx] |= np.asarray(scene.cup.contains(q[idx, :2]), bool)
-    return out
 
 
 def view_areas(scene: Scene, points: np.ndarray, normals: np.ndarray,
@@ -139,6 +120,8 @@ def surround_sizes(scene: Scene, footprint: np.ndarray, samples: int = BALANCE_S
     (x0, x1), (y0, y1) = footprint
     gx, gy = np.meshgrid(np.linspace(x0, x1, samples), np.linspace(y0, y1, samples))
     pts = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+    if scene.saucer.is_disc:  # a round part covers its disc, not the corners of its bounding square
+        pts = pts[scene.saucer.on_saucer(pts[:, :2])]
     up = np.tile([0.0, 0.0, 1.0], (pts.shape[0], 1))
     direct, mirror = view_areas(scene, pts, up)
     cell = ((x1 - x0) / (samples - 1)) * ((y1 - y0) / (samples - 1)) / AREA_STEP**2

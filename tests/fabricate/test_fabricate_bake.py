@@ -279,3 +279,21 @@ def test_warm_up_compiles_every_kernel() -> None:
     jitted = [n for n in dir(kernels) if hasattr(getattr(kernels, n), "signatures")]
     assert sorted(names) == sorted(jitted)
     assert all(getattr(kernels, n).signatures for n in names)
+
+
+@pytest.mark.parametrize("shape", ["rectangle", "disc"])
+def test_side_charts_stay_far_under_the_tops_texel_density(shape: str) -> None:
+    """The sides carry plain colours: at most SIDE_DENSITY_SHARE of the top's texels per mm, so a checker
+    takes them for plain (under a tenth of the best density) however large the part's bottom is."""
+    from saucerfab.fabricate.atlas import SIDE_DENSITY_SHARE, _px_per_mm
+    from saucerfab.model.scene import disc_saucer, round_scene
+
+    scene = replace(round_scene(), saucer=disc_saucer(2.0, 24)) if shape == "disc" else None
+    d = synthetic_design(scene, resolution=24, texture_size=32)
+    solid = build_solid(d, d.scene.mm_per_unit, FabOptions())
+    lay = layout_page(1024, 8, solid.grid_x, solid.grid_y, solid.heights)
+    uvm = build_uvmap(solid, lay)
+    px = uvm.uvs * 1024
+    top = _px_per_mm(solid.vertices, solid.faces[solid.is_top], px, uvm.face_uvs[solid.is_top])
+    sides = _px_per_mm(solid.vertices, solid.faces[~solid.is_top], px, uvm.face_uvs[~solid.is_top])
+    assert 0 < sides <= SIDE_DENSITY_SHARE * top * (1 + 1e-6)

@@ -12,8 +12,9 @@ import pytest
 
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.pipeline import export_design
-from saucerfab.fabricate.sides import hidden_by_cup, shown_by_cup, surround_sizes, view_areas
+from saucerfab.fabricate.sides import shown_by_cup, surround_sizes, view_areas
 from saucerfab.model.design_folder import synthetic_design
+from saucerfab.model.footprint import hidden_by_cup
 from saucerfab.model.scene import Scene
 
 UP = np.array([0.0, 0.0, 1.0])
