@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from saucerfab.model.cups import Cup
 from saucerfab.model.scene import Scene
 
 #: directions in which a vertex is tested against the cup's footprint when growing it by the ring
@@ -30,26 +31,28 @@ RING_DIRECTIONS = 16
 SIGHT_SAMPLES = 64
 
 
-def near_cup(scene: Scene, xy: np.ndarray) -> np.ndarray:
-    """(P,) bool: the points (P, 2) lie in the cup's footprint grown by its ring (``Scene.cup_ring_units``).
+def in_grown_footprint(cup: Cup, xy: np.ndarray, ring: float) -> np.ndarray:
+    """(P,) bool: the points (P, 2), about the cup's axis, lie in its footprint grown by ``ring`` (same units).
 
     The growth is tested as the footprint containing the point moved by the
     ring's width in :data:`RING_DIRECTIONS` directions (exact for a circle up to
     the directions' spacing, within ``ring * (1 - cos(pi / 16))`` = 2 % of the ring for the others).
     """
     p = np.asarray(xy, np.float64)
-    ring = scene.cup_ring_units
-    out = np.asarray(scene.cup.contains(p), bool).copy()
-    reach = scene.cup.circumradius + ring
-    close = np.flatnonzero(~out & (np.hypot(p[:, 0], p[:, 1]) <= reach))
+    out = np.asarray(cup.contains(p), bool).copy()
+    close = np.flatnonzero(~out & (np.hypot(p[:, 0], p[:, 1]) <= cup.circumradius + ring))
     for a in 2 * np.pi * np.arange(RING_DIRECTIONS) / RING_DIRECTIONS:
         if close.size == 0:
             break
-        moved = p[close] + ring * np.array([np.cos(a), np.sin(a)])
-        hit = np.asarray(scene.cup.contains(moved), bool)
+        hit = np.asarray(cup.contains(p[close] + ring * np.array([np.cos(a), np.sin(a)])), bool)
         out[close[hit]] = True
         close = close[~hit]
     return out
+
+
+def near_cup(scene: Scene, xy: np.ndarray) -> np.ndarray:
+    """(P,) bool: the points (P, 2) lie in the cup's footprint grown by its ring (``Scene.cup_ring_units``)."""
+    return in_grown_footprint(scene.cup, xy, scene.cup_ring_units)
 
 
 def design_vertices(scene: Scene, xy: np.ndarray) -> np.ndarray:

@@ -31,7 +31,8 @@ from saucerfab.errors import InputFileError, SceneFileError
 from saucerfab.fabricate.scene_file import MAX_SCENE_JSON_BYTES, PrintScene, read_scene_file
 from saucerfab.files.formats import TABLE
 from saucerfab.model.design_folder import reference_name
-from saucerfab.model.scene import MAX_GRID
+from saucerfab.model.footprint import in_grown_footprint
+from saucerfab.model.scene import CUP_RING_MM, MAX_GRID
 
 #: largest reference picture read, bytes and pixels
 MAX_REFERENCE_BYTES = 64 << 20
@@ -127,6 +128,11 @@ def top_faces(vertices: np.ndarray, faces: np.ndarray, scene: PrintScene) -> np.
         & (tri[..., 1] >= y0 - tol).all(1)
         & (tri[..., 1] <= y1 + tol).all(1)
     )
+    if scene.is_disc:
+        # a round part's seat (the pocket's floor, its rim) lies inside the disc: it is not the relief's top;
+        # it stands within the cup's ring (CUP_RING_MM around the cup's footprint), which holds no design
+        c = tri.mean(axis=1)[:, :2] - np.asarray(scene.cup.center)
+        inside &= ~in_grown_footprint(scene.cup.outline, c, CUP_RING_MM)
     return inside & (nz > 1e-6)
 
 
