@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_scene_choice.py                  # the sweep, a table per picture shape
     .venv/bin/python benchmarks/bench_scene_choice.py --write-best DIR # and the best scenes as TOML files
+    .venv/bin/python benchmarks/bench_scene_choice.py --round 160,200,240  # round saucers of these diameters
 
 Issue 43, item 4: "a lower eye and a deeper saucer make [the mirror's image
 of the saucer] taller, a wider saucer makes it wider". For every candidate
@@ -106,6 +107,25 @@ def fitted(scene: Scene, pair: tuple[str, str], folder: Path) -> Scene:
     return prepare(DesignRequest(direct=SAMPLES / direct, reflected=SAMPLES / reflected, scene=str(toml))).scene
 
 
+def round_sizes(diameters: tuple[float, ...], shapes: dict[str, tuple[str, str]], tmp: Path) -> int:
+    """The pictures' sizes on round saucers of ``diameters`` mm around the paper's cup (frames fitted, no design)."""
+    from saucerfab.model.scene import disc_saucer, round_grid, round_scene
+
+    print("| round saucer mm | reflected picture's width: square / 2:1 | direct picture's width of the disc's row: "
+          "square / 2:1 | direct frame's half angle, square / 2:1 |")
+    print("|---:|---|---|---|")
+    for mm in diameters:
+        base = round_scene()
+        d = mm / base.mm_per_unit
+        scene = replace(base, saucer=disc_saucer(d, round_grid(d)))
+        fits = {k: fitted(scene, pair, tmp) for k, pair in shapes.items()}
+        print(f"| {mm:.0f} | {reflected_width_share(fits['square']):.0%} / "
+              f"{reflected_width_share(fits['reflected 2:1']):.0%} | {direct_width_share(fits['square']):.0%} / "
+              f"{direct_width_share(fits['direct 2:1']):.0%} | {fits['square'].direct.viewing_angle_deg:.2f} / "
+              f"{fits['direct 2:1'].direct.viewing_angle_deg:.2f} deg |", flush=True)
+    return 0
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--write-best", type=Path, metavar="DIR",
@@ -114,11 +134,15 @@ def main() -> int:
     for name, values in (("distances", DISTANCES), ("heights", HEIGHTS), ("widths", WIDTHS), ("depths", DEPTHS)):
         p.add_argument(f"--{name}", type=lambda t: tuple(float(v) for v in t.split(",")), default=values,
                        help=f"comma-separated model units (default {','.join(map(str, values))})")
+    p.add_argument("--round", type=lambda t: tuple(float(v) for v in t.split(",")), metavar="MM,...",
+                   help="instead: round saucers (the `round` scene) of these diameters in mm, e.g. 160,200,240")
     args = p.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="saucerfab-scenes-"))
     wide = wide_pairs(tmp)  # heart-2stars (reflected 2:1), 2hearts-star (direct 2:1)
     shapes = {"square": PAIRS["heart-star"], "reflected 2:1": wide["heart-2stars"],
               "direct 2:1": wide["2hearts-star"]}
+    if args.round:
+        return round_sizes(args.round, shapes, tmp)
     rows = []
     for d, h, w, dp in itertools.product(args.distances, args.heights, args.widths, args.depths):
         scene = candidate(d, h, w, dp)

@@ -91,7 +91,7 @@ def wide_pairs(folder: Path) -> dict[str, tuple[str, str]]:
 def direct_width_share(scene) -> float:  # noqa: ANN001 (a saucerfab.model.scene.Scene)
     """The direct picture's width over the saucer's visible width, along the picture's middle row (design eye).
 
-    The saucer's footprint (at height 0) is projected into the direct camera; its image is cut by the
+    The saucer's footprint (at height 0; a disc's points on it) is projected into the direct camera; its image is cut by the
     row ``y_ndc = 0`` (the picture's middle); the picture spans ``2 * extent[0]`` of the NDC width.
     """
     from saucerfab.model.camera import Camera
@@ -104,9 +104,9 @@ def direct_width_share(scene) -> float:  # noqa: ANN001 (a saucerfab.model.scene
     for y in ys:  # the footprint's row through the picture's middle: where the projection's y crosses 0
         pts = np.stack([np.linspace(x0, x1, 2001), np.full(2001, y), np.zeros(2001)], axis=1)
         ndc = cam.project(pts)
-        xs_hit.append(ndc[:, :2])
+        xs_hit.append(np.where(scene.saucer.on_saucer(pts[:, :2])[:, None], ndc[:, :2], np.nan))  # a disc: on it
     grid = np.stack(xs_hit)  # (rows, cols, 2)
-    near = np.abs(grid[..., 1]) < 2.0 / cam.image_size
+    near = np.abs(np.nan_to_num(grid[..., 1], nan=np.inf)) < 2.0 / cam.image_size
     width = float(grid[..., 0][near].max() - grid[..., 0][near].min())
     return 2.0 * scene.direct.extent[0] / width
 

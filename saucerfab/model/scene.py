@@ -321,10 +321,12 @@ def wide_scene() -> Scene:
 
 
 #: a round saucer's diameter over the cup's width: 200 mm for the 80 mm cup. Measured (benchmarks/RESULTS.md,
-#: "The round saucer"): the mirror shows the saucer in a band around the cup's foot, as tall as the saucer
-#: reaches in front of the cup; at twice the cup (160 mm) a 2:1 reflected picture spans 36 % of the cup's
-#: width (the paper's rectangle: 44 %), at 2.5 times 68 %, at 3 times 77 % (and a square one 23 / 38 / 55 %).
-#: 200 mm fits every bundled printer but the HP (190 mm deep), which is refused naming the largest that fits.
+#: "The round saucer"; bench_scene_choice.py --round): the mirror shows the saucer in a band around the cup's
+#: foot, as tall as the saucer reaches in front of the cup; at twice the cup (160 mm) a 2:1 reflected picture
+#: spans 54 % of the cup's width (the paper's rectangle: 44 %), at 2.5 times 68 %, at 3 times 83 % (a square
+#: one 31 / 42 / 54 %; the paper's 38 %), while the direct picture, in front of the cup, is smaller than on
+#: the paper's rectangle at any of them. 200 mm fits every bundled printer but the HP (190 mm deep), which
+#: is refused naming the largest that fits.
 ROUND_DIAMETER_PER_CUP = 2.5
 #: grid vertices per model unit on a round saucer: the paper's step (150 across its 1-unit rectangle: 0.67 mm)
 ROUND_GRID_PER_UNIT = 149.0
