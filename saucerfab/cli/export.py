@@ -87,6 +87,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"gap around the cup's footprint (default {_default('seat_clearance_mm')})")
     g.add_argument("--seat-rim-mm", dest="seat_rim_mm", type=float,
                    help=f"plate width around the recess (default {_default('seat_rim_mm')})")
+    g.add_argument("--saucer-rim-mm", dest="saucer_rim_mm", type=float, metavar="W",
+                   help="a round saucer's raised rim: a ring W mm wide at its outer edge (refused with a rectangle; "
+                        f"default {_default('saucer_rim_mm')}: none)")
+    g.add_argument("--saucer-rim-height-mm", dest="saucer_rim_height_mm", type=float, metavar="H",
+                   help="how far the rim's top stands above the highest relief under it (with --saucer-rim-mm; "
+                        f"default {_default('saucer_rim_height_mm')})")
     c = p.add_argument_group("colour and files")
     c.add_argument("--wall-rgb", dest="wall_rgb", type=_rgb,
                    help="sRGB of walls, base and seat (default: the background the design meant around its direct "
@@ -115,7 +121,8 @@ def given_options(args: argparse.Namespace) -> dict[str, Any]:
     """The :class:`FabOptions` settings the user gave, by field name (``--no-seat`` as ``seat="none"``).
 
     Raises:
-        ConfigError: ``--no-seat`` together with ``--seat recess`` or ``ring``.
+        ConfigError: ``--no-seat`` together with ``--seat recess`` or ``ring``; ``--saucer-rim-height-mm``
+            without a rim (``--saucer-rim-mm`` left out or 0).
     """
     from saucerfab.errors import ConfigError
 
@@ -125,6 +132,11 @@ def given_options(args: argparse.Namespace) -> dict[str, Any]:
             "for a seat, or --no-seat (same as --seat none) for none, not both"
         )
     given = {f.name: getattr(args, f.name) for f in fields(FabOptions) if getattr(args, f.name, None) is not None}
+    if given.get("saucer_rim_height_mm") is not None and not given.get("saucer_rim_mm"):
+        raise ConfigError(
+            f"--saucer-rim-height-mm {given['saucer_rim_height_mm']:g} is the raised rim's height, but no rim "
+            "was asked for; add --saucer-rim-mm W (the rim's width) for a rim, or leave the height out"
+        )
     if args.no_seat:
         given["seat"] = "none"
     return given

@@ -52,6 +52,12 @@ class FabOptions:
         seat_clearance_mm: gap between the cup's footprint and the recess
             wall (or the ring's inside), so a real cup drops in.
         seat_rim_mm: width of plate material around the recess (ring width).
+        saucer_rim_mm: a round saucer's raised rim: the width of a ring at the
+            disc's outer edge standing from the part's base above the relief
+            (:mod:`saucerfab.fabricate.round_solid`); 0 (the default): no rim.
+            Refused on a rectangle saucer.
+        saucer_rim_height_mm: how far the rim's top stands above the highest
+            point of the relief under it (used only with a rim).
         texture_px: atlas edge in pixels; ``None`` = the printer profile's
             resolution for the part's size (``PrinterProfile.texture_px_for``).
         padding_px: gutter around each atlas region filled by edge dilation,
@@ -82,6 +88,8 @@ class FabOptions:
     seat_depth_mm: float = 1.5
     seat_clearance_mm: float = 0.5
     seat_rim_mm: float = 4.0
+    saucer_rim_mm: float = 0.0
+    saucer_rim_height_mm: float = 2.0
     texture_px: int | None = None
     padding_px: int = 8
     wall_rgb: tuple[int, int, int] | None = None
@@ -99,6 +107,8 @@ class FabOptions:
         _pos("seat_depth_mm", self.seat_depth_mm)
         _pos("seat_clearance_mm", self.seat_clearance_mm, zero_ok=True)
         _pos("seat_rim_mm", self.seat_rim_mm)
+        _pos("saucer_rim_mm", self.saucer_rim_mm, zero_ok=True)
+        _pos("saucer_rim_height_mm", self.saucer_rim_height_mm)
         if self.texture_px is not None:
             tp = self.texture_px
             if (
@@ -134,7 +144,7 @@ class FabOptions:
             raise ConfigError(f"coord_decimals must be an integer in [3, 9], got {self.coord_decimals!r}")
 
     def walls_under(self, min_wall_mm: float) -> list[str]:
-        """What of the solid's own walls (base, material under the saucer, seat rim) is under ``min_wall_mm``.
+        """What of the solid's own walls (base, under the saucer, seat rim, saucer rim) is under ``min_wall_mm``.
 
         One rule for the export (``fabricate/solid.py``) and the design's
         preflight (``optimize/printable.py``); each string names the option.
@@ -145,11 +155,20 @@ class FabOptions:
         ]
         if self.seat != "none":
             walls.append(("seat_rim_mm", self.seat_rim_mm))
+        if self.saucer_rim_mm > 0:  # 0: no rim, no wall
+            walls.append(("saucer_rim_mm (the round saucer's raised rim)", self.saucer_rim_mm))
         return [f"{what} = {v:g} mm is below the minimum wall {min_wall_mm:g} mm" for what, v in walls if v < min_wall_mm]
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data (JSON-ready)."""
+        """Plain data (JSON-ready).
+
+        Without a rim (``saucer_rim_mm`` 0) the rim's two settings are left
+        out: they shape nothing, and a part without a rim is recorded
+        (``export.json``) exactly as before the rim existed.
+        """
         d = asdict(self)
+        if not self.saucer_rim_mm:
+            del d["saucer_rim_mm"], d["saucer_rim_height_mm"]
         for key in ("wall_rgb", "mirror_rgb"):
             d[key] = None if getattr(self, key) is None else list(getattr(self, key))
         return d

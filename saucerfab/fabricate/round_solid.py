@@ -7,7 +7,7 @@ block as for the rectangle (the N x N top, four walls, a flat bottom) and
 hands it to :func:`disc_part`, which makes, all in model millimetres and all
 with manifold3d::
 
-    ((block + seat) - pocket) ^ cylinder
+    ((block + seat + rim) - pocket) ^ cylinder
 
 * the *cylinder*: a prism over the disc's outline, a regular polygon whose
   vertices lie on the circle of the saucer's radius and whose chords stray
@@ -45,6 +45,18 @@ with manifold3d::
   to the rim's top, or to the floor for ``none``) starts inside the block's
   material (:func:`seat_base_z`), so no face of it lies on the bottom.
 
+* the *rim* (``FabOptions.saucer_rim_mm`` > 0; none by default): a ring
+  ``saucer_rim_mm`` wide at the disc's outer edge, from inside the block's
+  material (:func:`seat_base_z`) up to ``saucer_rim_height_mm`` above the
+  highest point of the relief under it (:func:`relief_top_under`). Its inside is a
+  polygon with its vertices on the circle of radius R - width (chords
+  within :data:`CHORD_MM`); its outside reaches past the disc, so the
+  cylinder cuts it and the part's side wall stays one wall. Its faces
+  (top, inside wall) are sides, not top: the bake paints them with the
+  sides' colours. :func:`check_rim` refuses a rim on a rectangle and one
+  wide enough to reach the cup's ring; one narrower than the printer's
+  minimum wall is a problem (``FabOptions.walls_under``).
+
 Nothing here depends on the rectangle's exact-contact machinery
 (:func:`saucerfab.fabricate.solid.footprint_on_clipper_grid`): no face of
 the seat or the cylinder meets a face of the block face to face.
@@ -57,9 +69,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from saucerfab.errors import ConfigError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.seat import OUTLINE_EPS_MM, cross_section, cup_outline_mm
-from saucerfab.model.scene import Scene
+from saucerfab.model.scene import CUP_RING_MM, Scene
 
 #: the largest distance between the disc's outline polygon and its circle (the chords' sagitta), mm
 CHORD_MM = 0.01
@@ -104,6 +117,97 @@ def seat_base_z(z_bottom: float, options: FabOptions) -> float:
     return z_bottom + 0.5 * min(options.base_thickness_mm, options.min_thickness_mm)
 
 
+def check_rim(scene: Scene, mm_per_unit: float, options: FabOptions) -> None:
+    """Refuse a raised rim (``options.saucer_rim_mm``) the part cannot have; nothing without one.
+
+    Raises:
+        ConfigError: a rim asked for on a rectangle saucer (it only runs round
+            a disc), or one so wide that its inside (R - width from the cup's
+            axis) reaches the cup's footprint and its ring
+            (:data:`saucerfab.model.scene.CUP_RING_MM`), where the seat
+            stands; the message names the largest width that fits.
+    """
+    width = options.saucer_rim_mm
+    if not width:
+        return
+    if not scene.saucer.is_disc:
+        raise ConfigError(
+            f"--saucer-rim-mm {width:g} asks for a raised rim round a round saucer's edge, but this design's "
+            "saucer is a rectangle; leave --saucer-rim-mm out, or design with --scene round for a round saucer"
+        )
+    s = float(mm_per_unit)
+    radius = scene.saucer.radius * s
+    reach = float(np.hypot(*cup_outline_mm(scene, s).T).max())  # the cup's farthest point from its axis, mm
+    room = radius - reach - CUP_RING_MM  # the rim's inside must stay farther out than this
+    if width >= room - 1e-9:
+        largest = math.floor(room * 100.0 - 1e-6) / 100.0  # just under: a width of `room` touches the ring
+        raise ConfigError(
+            f"--saucer-rim-mm {width:g} is too wide: the rim's inside, {radius - width:.2f} mm from the cup's axis, "
+            f"would reach the cup ({reach:.2f} mm) and its {CUP_RING_MM:g} mm seat ring on the "
+            f"{2.0 * radius:.1f} mm saucer; give --saucer-rim-mm {largest:g} or less"
+        )
+
+
+def rim_over_picture(scene: Scene, mm_per_unit: float, options: FabOptions, xs_mm: np.ndarray, ys_mm: np.ndarray,
+                     heights_mm: np.ndarray) -> str | None:
+    """A warning when the rim covers part of the direct picture; None without a rim or when it covers none.
+
+    The design does not know the export's rim: a direct picture that reaches
+    the disc's edge loses its outer ``saucer_rim_mm`` under it. Counted on the
+    grid vertices under the ring that the design eye sees as design
+    (:func:`saucerfab.model.footprint.direct_vertices`) inside the direct
+    frame's picture (its ``extent``); the message says how near the edge the
+    picture comes.
+
+    Args:
+        xs_mm, ys_mm: (N,) the grid's columns and rows, model mm.
+        heights_mm: (N, N) the relief, model mm (row i at ``ys_mm[i]``).
+    """
+    from saucerfab.model.camera import Camera
+    from saucerfab.model.footprint import direct_vertices
+
+    width = options.saucer_rim_mm
+    if not width or not scene.saucer.is_disc:
+        return None
+    s = float(mm_per_unit)
+    radius = scene.saucer.radius * s
+    gx, gy = np.meshgrid(xs_mm, ys_mm)
+    pts = np.stack([gx.ravel(), gy.ravel(), np.asarray(heights_mm, np.float64).ravel()], axis=1) / s
+    r = np.hypot(gx.ravel(), gy.ravel())
+    band = np.flatnonzero((r > radius - width) & (r <= radius * (1.0 + 1e-9)))
+    seen = band[direct_vertices(scene, pts[band])]
+    ndc = Camera.from_scene(scene, "direct").project(pts[seen])
+    ex, ey = scene.direct.extent
+    covered = seen[(ndc[:, 2] > 0) & (np.abs(ndc[:, 0]) <= ex) & (np.abs(ndc[:, 1]) <= ey)]
+    if covered.size == 0:
+        return None
+    gap = radius - float(r[covered].max())  # how near the edge the picture's grid vertices come, mm
+    return (f"the direct picture reaches within {gap:.1f} mm of the round saucer's edge, so the {width:g} mm saucer "
+            f"rim covers part of it ({covered.size} of its grid vertices; the rim's height hides a little more "
+            "from the eye); a narrower --saucer-rim-mm, or none, covers less, and 'saucerfab verify' shows what it "
+            "costs")
+
+
+def relief_top_under(block: object, ring: object, z_bottom: float, z_top: float) -> float:
+    """The highest point of the block's top over the 2-D region ``ring``, model mm.
+
+    Exact for the triangulated relief: the block is cut to a prism over
+    ``ring`` (a manifold3d ``CrossSection``) and the cut's highest vertex
+    taken, whether a grid vertex or where a top triangle meets the ring's
+    walls.
+
+    Args:
+        block: the saucer block (a manifold3d ``Manifold``), model mm.
+        ring: the region, model mm (the rim's footprint on the disc).
+        z_bottom, z_top: the block's bottom and highest point, model mm.
+    """
+    import manifold3d as m3d
+
+    low, high = z_bottom - OVERSHOOT_MM, z_top + OVERSHOOT_MM
+    cut = block ^ m3d.Manifold.extrude(ring, high - low).translate((0.0, 0.0, low))
+    return float(cut.bounding_box()[5])
+
+
 @dataclass(frozen=True)
 class DiscPart:
     """What :func:`disc_part` built.
@@ -112,15 +216,19 @@ class DiscPart:
         solid: the part (a lazy manifold3d ``Manifold``), model mm.
         pocket: (K, 2) the seat's pocket outline (the cup's footprint grown by
             the clearance), model mm, counter-clockwise.
-        top_z: the rim's top over the cup's standing plane, mm
+        top_z: the seat rim's top over the cup's standing plane, mm
             (``seat_depth_mm``; 0 for ``none``).
         segments: sides of the disc's outline polygon.
+        rim_top_z: the saucer rim's top, model mm (``saucer_rim_height_mm``
+            over :func:`relief_top_under` the rim); None
+            without a rim.
     """
 
     solid: object
     pocket: np.ndarray
     top_z: float
     segments: int
+    rim_top_z: float | None = None
 
 
 def disc_part(block: object, scene: Scene, mm_per_unit: float, options: FabOptions, z_bottom: float,
@@ -131,7 +239,8 @@ def disc_part(block: object, scene: Scene, mm_per_unit: float, options: FabOptio
         block: the saucer block over the square grid, model mm.
         scene: the design's scene (a disc saucer, the cup at its centre).
         mm_per_unit: millimetres per model unit.
-        options: the seat's kind and sizes.
+        options: the seat's kind and sizes, and the saucer rim's
+            (:func:`check_rim` has passed them).
         z_bottom: the block's flat bottom, model mm (below 0).
         z_top: the block's highest point, model mm.
     """
@@ -140,7 +249,17 @@ def disc_part(block: object, scene: Scene, mm_per_unit: float, options: FabOptio
     s = float(mm_per_unit)
     radius = scene.saucer.radius * s
     outline = disc_outline_mm(radius)
-    high = max(z_top, options.seat_depth_mm) + OVERSHOOT_MM
+    base = seat_base_z(z_bottom, options)
+    parts = [block]
+    rim_top = None
+    if options.saucer_rim_mm > 0:
+        inside = cross_section(disc_outline_mm(radius - options.saucer_rim_mm))
+        under = relief_top_under(block, cross_section(outline) - inside, z_bottom, z_top)
+        rim_top = under + options.saucer_rim_height_mm
+        # outside past the disc: the cylinder below cuts it on the part's own side wall
+        ring = cross_section(disc_outline_mm(radius + OVERSHOOT_MM)) - inside
+        parts.append(m3d.Manifold.extrude(ring, rim_top - base).translate((0.0, 0.0, base)))
+    high = max(z_top, options.seat_depth_mm, rim_top or 0.0) + OVERSHOOT_MM
     low = z_bottom - OVERSHOOT_MM
     cylinder = m3d.Manifold.extrude(cross_section(outline), high - low).translate((0.0, 0.0, low))
 
@@ -151,7 +270,6 @@ def disc_part(block: object, scene: Scene, mm_per_unit: float, options: FabOptio
         if options.seat_clearance_mm > 0
         else cup_cs
     )
-    base = seat_base_z(z_bottom, options)
     if options.seat == "none":
         seat_cs, seat_top = inner, 0.0  # the floor alone: its top is the pocket's floor
     else:
@@ -159,10 +277,11 @@ def disc_part(block: object, scene: Scene, mm_per_unit: float, options: FabOptio
             OUTLINE_EPS_MM
         )
         seat_top = options.seat_depth_mm
-    seat = m3d.Manifold.extrude(seat_cs, seat_top - base).translate((0.0, 0.0, base))
+    parts.append(m3d.Manifold.extrude(seat_cs, seat_top - base).translate((0.0, 0.0, base)))
     cut = m3d.Manifold.extrude(inner, high)  # from the standing plane z = 0 up
     # the cylinder last: it trims a seat wider than the disc too (seat_ring_problem lists that)
-    solid = (m3d.Manifold.batch_boolean([block, seat], m3d.OpType.Add) - cut) ^ cylinder
+    solid = (m3d.Manifold.batch_boolean(parts, m3d.OpType.Add) - cut) ^ cylinder
     polys = inner.to_polygons()
     pocket = np.asarray(max(polys, key=len), np.float64) if polys else np.zeros((0, 2))
-    return DiscPart(solid=solid, pocket=pocket, top_z=float(seat_top), segments=int(outline.shape[0]))
+    return DiscPart(solid=solid, pocket=pocket, top_z=float(seat_top), segments=int(outline.shape[0]),
+                    rim_top_z=rim_top)

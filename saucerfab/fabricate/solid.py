@@ -62,7 +62,7 @@ import numpy as np
 
 from saucerfab.errors import MeshError
 from saucerfab.fabricate.options import FabOptions
-from saucerfab.fabricate.round_solid import disc_part
+from saucerfab.fabricate.round_solid import check_rim, disc_part, rim_over_picture
 from saucerfab.fabricate.seat import (
     OUTLINE_EPS_MM,
     clip_to_cup_side,
@@ -392,12 +392,14 @@ def build_solid(
     Raises:
         MeshError: manifold3d rejects the mesh, the volume is not positive,
             or the part is too thin for a ``refuse`` profile.
+        ConfigError: a saucer rim the part cannot have (:func:`~saucerfab.fabricate.round_solid.check_rim`).
     """
     import manifold3d as m3d
 
     opts = options or FabOptions()
     if not (math.isfinite(mm_per_unit) and mm_per_unit > 0):
         raise MeshError(f"mm_per_unit must be positive, got {mm_per_unit}")
+    check_rim(design.scene, mm_per_unit, opts)  # a raised rim: a round saucer's, narrower than its band
     grid = make_grid(design.scene.saucer)
     s = float(mm_per_unit)
     footprint, xs, ys = footprint_on_clipper_grid(grid.xs * s, grid.ys * s)
@@ -465,6 +467,9 @@ def build_solid(
     if disc:
         part = disc_part(block, design.scene, s, opts, z_bottom, float(hmm.max()))
         solid, pocket, top_z = part.solid, part.pocket, part.top_z
+        covered = rim_over_picture(design.scene, s, opts, xs, ys, hmm)
+        if covered is not None:
+            warnings.append(covered)
     elif kind != "none":
         cup_cs = cross_section(cup_outline)
         # Clipper's round joins can leave vertex pairs ~1e-8 mm apart; the hull keeps one
