@@ -139,6 +139,8 @@ BASE_SHAPES: dict[str, Callable[[np.ndarray, np.ndarray, np.random.Generator], n
 
 #: the shapes whose ridges run across the line of sight (along x on a rectangle): around the cup on a disc
 AROUND_THE_CUP = ("waves", "tabula_scalata")
+#: on a disc those ridges are this many times as dense and 1 / this as high as on the paper's rectangle
+RING_DENSITY = 2.0
 
 
 def shape_coordinates(n: int, saucer: Saucer | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -167,8 +169,13 @@ def base_shape(name: str, n: int, seed: int = 0, saucer: Saucer | None = None) -
     u, v = shape_coordinates(n, saucer)
     if key in AROUND_THE_CUP and saucer is not None and saucer.is_disc:
         # ridges across the line of sight on a rectangle are rings around the cup on a disc: v grows
-        # towards the cup's axis (as a rectangle's v does towards the cup), so fronts face out, backs the cup
-        v = 1.0 - np.hypot(u - 0.5, v - 0.5)
+        # towards the cup's axis (as a rectangle's v does towards the cup), so fronts face out, backs the
+        # cup; at half the spacing and half the height (the same slopes, which part what the eye sees from
+        # what the cup sees): a disc's direct picture is about half a rectangle's width, and a viewer's
+        # eyes beside the design eye see the relief's parallax across it in proportion to its height
+        # (benchmarks/RESULTS.md, "The default scene: rectangle, wide or round": +2 dB from those eyes)
+        v = RING_DENSITY * (1.0 - np.hypot(u - 0.5, v - 0.5))
+        return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64) / RING_DENSITY
     return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64)
 
 

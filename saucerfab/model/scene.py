@@ -276,7 +276,8 @@ class Scene:
             raise GeometryError(
                 f"the round saucer ({2.0 * self.saucer.radius * s:.1f} mm across) is too small for the "
                 f"{self.cup_diameter_mm:g} mm {self.cup.kind} cup at its centre, its {CUP_RING_MM:g} mm seat ring "
-                f"and a {MIN_DISC_BAND_MM:g} mm band of design; give a saucer of at least {math.ceil(smallest_mm - 1e-6):g} mm "
+                f"and a {MIN_DISC_BAND_MM:g} mm band of design; give a saucer of at least "
+                f"{math.ceil(smallest_mm - 1e-6):g} mm "
                 "(--saucer-diameter-mm) or a smaller cup"
             )
 
@@ -307,10 +308,10 @@ def paper_scene() -> Scene:
 
 #: the ``wide`` scene's saucer, model units along x: 175 mm for the 80 mm cup. The mirror shows a saucer
 #: across more of its width the wider the saucer is: measured over eye positions and saucer sizes (issue
-#: 43, benchmarks/bench_scene_choice.py and bench_whole.py; benchmarks/RESULTS.md, "The default scene"),
-#: the reflected picture spans about 49 % of the cup's width (square; 57 % at 2:1) where the paper's 100 mm
-#: gives 39 % (43 %), and a 2:1 direct picture still 85 % of the saucer's width; but the frames' PSNR
-#: drops 6-13 dB there, so it is not the default yet.
+#: 43, benchmarks/bench_scene_choice.py and bench_whole.py; benchmarks/RESULTS.md, "The default scene:
+#: rectangle, wide or round"), the reflected picture spans about 49 % of the cup's width (square; 57 % at
+#: 2:1) where the paper's 100 mm gives 39 % (43 %), and a 2:1 direct picture still 85 % of the saucer's
+#: width; but the frames' PSNR drops 6-13 dB there, so it is not the default yet.
 WIDE_X_RANGE = (-0.875, 0.875)
 
 
@@ -320,13 +321,13 @@ def wide_scene() -> Scene:
     return replace(base, saucer=replace(base.saucer, x_range=WIDE_X_RANGE))
 
 
-#: a round saucer's diameter over the cup's width: 200 mm for the 80 mm cup. Measured (benchmarks/RESULTS.md,
-#: "The round saucer"; bench_scene_choice.py --round): the mirror shows the saucer in a band around the cup's
-#: foot, as tall as the saucer reaches in front of the cup; at twice the cup (160 mm) a 2:1 reflected picture
-#: spans 54 % of the cup's width (the paper's rectangle: 44 %), at 2.5 times 68 %, at 3 times 83 % (a square
-#: one 31 / 42 / 54 %; the paper's 38 %), while the direct picture, in front of the cup, is smaller than on
-#: the paper's rectangle at any of them. 200 mm fits every bundled printer but the HP (190 mm deep), which
-#: is refused naming the largest that fits.
+#: a round saucer's diameter over the cup's width: 200 mm for the 80 mm cup. Measured (bench_scene_choice.py
+#: --round; benchmarks/RESULTS.md, "The default scene: rectangle, wide or round"): the mirror shows the
+#: saucer in a band around the cup's foot, as tall as the saucer reaches in front of the cup; at twice the
+#: cup (160 mm) a 2:1 reflected picture spans 54 % of the cup's width (the paper's rectangle: 44 %), at 2.5
+#: times 68 %, at 3 times 83 % (a square one 31 / 42 / 54 %; the paper's 38 %), while the direct picture,
+#: in front of the cup, is smaller than on the paper's rectangle at any of them. 200 mm fits every bundled
+#: printer but the HP (190 mm deep), which is refused naming the largest that fits.
 ROUND_DIAMETER_PER_CUP = 2.5
 #: grid vertices per model unit on a round saucer: the paper's step (150 across its 1-unit rectangle: 0.67 mm)
 ROUND_GRID_PER_UNIT = 149.0
@@ -346,7 +347,7 @@ def round_scene() -> Scene:
 
 #: the named scenes (``--scene NAME``, ``preset = "NAME"`` in a scene TOML)
 PRESETS = {"paper": paper_scene, "wide": wide_scene, "round": round_scene}
-#: the scene a design gets when none is given (RESULTS.md, "The default scene", says why it is the paper's)
+#: the scene a design gets when none is given (RESULTS.md, "The default scene: rectangle, wide or round", says why)
 DEFAULT_PRESET = "paper"
 
 
@@ -432,7 +433,9 @@ def _saucer_from_dict(t: Any, base: Saucer) -> Saucer:
     outline = t.get("outline", base.outline)
     if "diameter" in t:
         if outline != "disc":
-            raise ConfigError('[saucer] diameter is for a round saucer (outline = "disc"); a rectangle takes x_range and y_range')
+            raise ConfigError(
+                '[saucer] diameter is for a round saucer (outline = "disc"); a rectangle takes x_range and y_range'
+            )
         if "x_range" in t or "y_range" in t:
             raise ConfigError("[saucer] takes a disc's diameter or its ranges, not both")
         d = t.pop("diameter")

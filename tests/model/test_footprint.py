@@ -132,3 +132,21 @@ def test_round_scene_reads_back_and_names_the_smallest_saucer() -> None:
 def test_bad_disc_tables_are_refused(table: dict, match: str) -> None:  # type: ignore[type-arg]
     with pytest.raises(ConfigError, match=match):
         scene_from_dict(table)
+
+
+def test_ridged_shapes_run_around_the_cup_on_a_disc() -> None:
+    """On a disc the waves are rings about the cup's axis, twice as dense and half as high as the paper's."""
+    from saucerfab.model.heightfield import RING_DENSITY, base_shape
+
+    saucer = disc_saucer(2.0, 201)
+    h = base_shape("waves", 201, 0, saucer)
+    paper = base_shape("waves", 150)
+    assert h.max() == pytest.approx(0.1 / RING_DENSITY, rel=1e-3) and paper.max() == pytest.approx(0.1, rel=1e-3)
+    # equal heights at equal distances from the axis: the grid's symmetries map rings onto themselves
+    assert np.allclose(h, np.rot90(h), atol=1e-12) and np.allclose(h, h.T, atol=1e-12)
+    # along a radius, the ridges come every 1 / (6 RING_DENSITY) model units (the paper: 6 across its 1 unit)
+    profile = h[100, 100:]
+    crests = np.flatnonzero((profile[1:-1] > profile[:-2]) & (profile[1:-1] >= profile[2:])) + 1
+    assert np.diff(crests).mean() * 0.01 == pytest.approx(1 / (6 * RING_DENSITY), rel=0.05)
+    # the rectangle's shapes are unchanged by the disc's coordinates
+    assert np.array_equal(base_shape("waves", 150, 0, load_scene("paper").saucer), paper)
