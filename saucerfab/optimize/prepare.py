@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -109,6 +110,23 @@ def _round_saucer(scene: Scene, request: DesignRequest) -> Scene:
     return replace(scene, cup=cup, cup_diameter_mm=cup_mm, saucer=saucer)
 
 
+def _disc_for_printer(scene: Scene, request: DesignRequest, target: PrintTarget) -> tuple[Scene, list[str]]:
+    """A round scene's own disc (no ``--saucer-diameter-mm``) shrunk to the largest the printer's build area
+    takes, with a note saying so; a diameter the user gave is left for the preflight to refuse."""
+    if not scene.saucer.is_disc or request.saucer_diameter_mm is not None:
+        return scene, []
+    s = scene.mm_per_unit
+    across = 2.0 * scene.saucer.radius * s
+    largest = math.floor(min(target.profile.build_volume_mm[:2]) + 1e-9)
+    if across <= largest:
+        return scene, []
+    d = largest / s
+    n = request.resolution if request.resolution is not None else round_grid(d)
+    fitted = replace(scene, saucer=disc_saucer(d, int(n), scene.saucer.delta))  # too small: the scene's own error
+    return fitted, [f"the round saucer is {largest:g} mm across, the largest {target.profile.name}'s build area takes "
+                    f"(the scene's is {across:.0f} mm; --saucer-diameter-mm sets it)"]
+
+
 def prepare(request: DesignRequest) -> Prepared:
     """Read and validate every input; raise a SaucerfabError before any work."""
     from saucerfab.imaging import fitting
@@ -124,9 +142,10 @@ def prepare(request: DesignRequest) -> Prepared:
             f"facets split the reflection into two regions; the scene's cup is a {scene.cup.kind}"
         )
     target = print_target(scene, request.printer)  # an unknown printer stops here, before any reading
+    scene, fit_note = _disc_for_printer(scene, request, target)
     n = scene.saucer.resolution
     base = load_shape(request.shape, n, height_scale=request.height_scale, seed=request.seed, saucer=scene.saucer)
-    print_notes = preflight(target, scene, base)
+    print_notes = [*fit_note, *preflight(target, scene, base)]
     groups: list[list[int]] | None = None
     placement: dict[str, Any] = {}
     if request.reflected2 is not None:

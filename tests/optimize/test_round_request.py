@@ -155,3 +155,18 @@ def test_scene_help_lists_the_presets_with_their_saucers(capsys: pytest.CaptureF
     for name in PRESETS:
         assert f"{name} (a " in out, (name, out)
     assert f"round (a {_diameter_mm(round_scene()):g} mm round saucer, the cup at its centre)" in out, out
+
+
+def test_the_round_scenes_own_disc_shrinks_to_the_printers_build_area() -> None:
+    """The `round` scene's 200 mm disc for a printer whose build area is 190 mm deep: 190 mm, said in a note;
+    a diameter the user gives is not changed but refused, naming the largest."""
+    from saucerfab.optimize.prepare import prepare
+
+    prep = prepare(DesignRequest(**PAIR, scene="round", printer="hp_jf580", resolution=40, image_size=32))
+    assert _diameter_mm(prep.scene) == pytest.approx(190.0)
+    assert any("190 mm across, the largest" in n for n in prep.print_notes), prep.print_notes
+    assert _diameter_mm(prepare(DesignRequest(**PAIR, scene="round", resolution=40, image_size=32)).scene) == \
+        pytest.approx(200.0)  # the J55 takes the scene's own
+    with pytest.raises(ConfigError, match="--saucer-diameter-mm 190 or less"):
+        prepare(DesignRequest(**PAIR, scene="round", printer="hp_jf580", saucer_diameter_mm=200.0, resolution=40,
+                              image_size=32))
