@@ -346,9 +346,13 @@ def export_design(
     bbox = solid.bbox_mm
     if not profile.fits(bbox):
         vol = " x ".join(f"{v:g}" for v in profile.build_volume_mm)
+        # a round saucer's size is the design's (its disc); a rectangle's scales with the cup
+        fix = (f"design it for this printer (saucerfab design --printer {profile.key} makes the round saucer as "
+               "large as it takes) or with a smaller --saucer-diameter-mm" if scene.saucer.is_disc
+               else "use a smaller --cup-diameter-mm")
         raise ExportError(
             f"the part is {bbox[0]:.1f} x {bbox[1]:.1f} x {bbox[2]:.1f} mm, larger than "
-            f"{profile.name}'s build volume {vol} mm; use a smaller --cup-diameter-mm"
+            f"{profile.name}'s build volume {vol} mm; {fix}"
         )
     ntri = int(solid.faces.shape[0])
     if profile.max_triangles and ntri > profile.max_triangles:

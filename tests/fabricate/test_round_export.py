@@ -169,3 +169,14 @@ def test_make_print_writes_every_format_of_a_round_part(folder: Path, tmp_path: 
         m.merge_vertices(merge_tex=True, merge_norm=True)
         assert m.is_watertight and m.volume == pytest.approx(res.export.volume_mm3, rel=1e-5), name
         assert_round_bounds(np.asarray(m.vertices), sj)
+
+
+def test_a_round_part_too_large_for_the_printer_names_the_round_fix(tmp_path: Path) -> None:
+    """A 200 mm round design exported for the HP (190 mm deep): the fix is the design's disc, not the cup."""
+    from saucerfab.errors import ExportError
+
+    sc = replace(round_scene(), saucer=disc_saucer(2.0, 32))
+    folder = save_design(synthetic_design(sc, resolution=32, texture_size=32, seed=1), tmp_path / "design")
+    with pytest.raises(ExportError, match="saucerfab design --printer hp_jf580 makes the round saucer"):
+        make_print(folder, tmp_path / "print", printer="hp_jf580", formats=["3mf"], verify=False)
+    assert not (tmp_path / "print").exists()
