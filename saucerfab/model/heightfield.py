@@ -173,7 +173,7 @@ def base_shape(name: str, n: int, seed: int = 0, saucer: Saucer | None = None) -
         # cup; at half the spacing and half the height (the same slopes, which part what the eye sees from
         # what the cup sees): a disc's direct picture is about half a rectangle's width, and a viewer's
         # eyes beside the design eye see the relief's parallax across it in proportion to its height
-        # (benchmarks/RESULTS.md, "The default scene: rectangle, wide or round": +2 dB from those eyes)
+        # (benchmarks/RESULTS.md, "The default scene: rectangle, wide or round": +3 to +4 dB from those eyes)
         v = RING_DENSITY * (1.0 - np.hypot(u - 0.5, v - 0.5))
         return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64) / RING_DENSITY
     return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64)
