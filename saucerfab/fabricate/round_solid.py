@@ -76,6 +76,11 @@ from saucerfab.model.scene import CUP_RING_MM, Scene
 
 #: the largest distance between the disc's outline polygon and its circle (the chords' sagitta), mm
 CHORD_MM = 0.01
+#: the least distance kept between the disc's outline and the heightfield grid's vertices and lines, mm
+GRID_GAP_MM = 2e-3
+#: the outline's radius is shrunk in steps of this until it keeps GRID_GAP_MM, at most NUDGE_STEPS times, mm
+NUDGE_MM = 5e-4
+NUDGE_STEPS = 40
 #: how far the cylinder and the pocket's cut reach past the part's bottom and top, mm (any positive length)
 OVERSHOOT_MM = 1.0
 
@@ -103,6 +108,53 @@ def disc_outline_mm(radius_mm: float, chord_mm: float = CHORD_MM) -> np.ndarray:
     n = disc_segments(radius_mm, chord_mm)
     a = (np.arange(n) + 0.5) * (2.0 * np.pi / n)
     return float(radius_mm) * np.stack([np.cos(a), np.sin(a)], axis=1)
+
+
+def grid_gap_mm(outline: np.ndarray, xs_mm: np.ndarray, ys_mm: np.ndarray) -> float:
+    """The least distance from the heightfield grid's vertices (``xs_mm`` x ``ys_mm``) to the sides of the
+    polygon ``outline`` (n, 2), mm (only the vertices within two grid steps of its radii are measured)."""
+    h = float(xs_mm[1] - xs_mm[0])
+    r = np.hypot(outline[:, 0], outline[:, 1])
+    gx, gy = np.meshgrid(xs_mm, ys_mm)
+    rg = np.hypot(gx, gy)
+    near = (rg > r.min() - 2.0 * h) & (rg < r.max() + 2.0 * h)  # the grid's vertices beside the outline
+    p = np.stack([gx[near], gy[near]], axis=1)
+    a, b = outline, np.roll(outline, -1, axis=0)
+    ab = b - a
+    t = np.clip(((p[:, None, :] - a[None]) * ab[None]).sum(-1) / (ab * ab).sum(-1)[None], 0.0, 1.0)
+    return float(np.linalg.norm(p[:, None, :] - (a[None] + t[..., None] * ab[None]), axis=-1).min())
+
+
+def clear_outline_mm(radius_mm: float, xs_mm: np.ndarray, ys_mm: np.ndarray) -> np.ndarray:
+    """:func:`disc_outline_mm` at the largest radius a little under ``radius_mm`` whose polygon keeps
+    :data:`GRID_GAP_MM` from the grid (:func:`grid_gap_mm`; of :data:`NUDGE_STEPS` tries, the clearest).
+
+    Where the polygon passes a hair from a grid vertex the cut leaves triangles of under a tenth of a
+    square micrometre that a checker calls zero-area (``check``'s degenerate faces); shrinking the
+    circle by micrometres moves it off them.
+    """
+    best, best_gap = disc_outline_mm(radius_mm), -1.0
+    for k in range(NUDGE_STEPS + 1):
+        outline = disc_outline_mm(radius_mm - k * NUDGE_MM)
+        gap = grid_gap_mm(outline, xs_mm, ys_mm)
+        if gap > best_gap:
+            best, best_gap = outline, gap
+        if gap >= GRID_GAP_MM:
+            break
+    return best
+
+
+def clear_level(z_mm: float, block: object) -> float:
+    """``z_mm`` raised by micrometres until no vertex of ``block`` (a manifold3d ``Manifold``) lies within
+    :data:`GRID_GAP_MM` of that height: the seat rim's flat top cuts the relief along its contour there, and
+    a contour passing a hair from a vertex leaves triangles a checker calls zero-area."""
+    z = np.asarray(block.to_mesh().vert_properties, np.float64)[:, 2]
+    level = float(z_mm)
+    for _ in range(NUDGE_STEPS):
+        if not (np.abs(z - level) < GRID_GAP_MM).any():
+            break
+        level += NUDGE_MM
+    return level
 
 
 def seat_base_z(z_bottom: float, options: FabOptions) -> float:
@@ -232,7 +284,7 @@ class DiscPart:
 
 
 def disc_part(block: object, scene: Scene, mm_per_unit: float, options: FabOptions, z_bottom: float,
-              z_top: float) -> DiscPart:
+              z_top: float, grid_mm: tuple[np.ndarray, np.ndarray] | None = None) -> DiscPart:
     """The round part from the heightfield ``block`` (a manifold3d ``Manifold``, model mm).
 
     Args:
@@ -243,17 +295,20 @@ def disc_part(block: object, scene: Scene, mm_per_unit: float, options: FabOptio
             (:func:`check_rim` has passed them).
         z_bottom: the block's flat bottom, model mm (below 0).
         z_top: the block's highest point, model mm.
+        grid_mm: the block's grid (xs, ys), model mm: the outlines keep clear of it
+            (:func:`clear_outline_mm`); None: the exact circles.
     """
     import manifold3d as m3d
 
     s = float(mm_per_unit)
     radius = scene.saucer.radius * s
-    outline = disc_outline_mm(radius)
+    outline = disc_outline_mm(radius) if grid_mm is None else clear_outline_mm(radius, *grid_mm)
     base = seat_base_z(z_bottom, options)
     parts = [block]
     rim_top = None
     if options.saucer_rim_mm > 0:
-        inside = cross_section(disc_outline_mm(radius - options.saucer_rim_mm))
+        inner_r = radius - options.saucer_rim_mm
+        inside = cross_section(disc_outline_mm(inner_r) if grid_mm is None else clear_outline_mm(inner_r, *grid_mm))
         under = relief_top_under(block, cross_section(outline) - inside, z_bottom, z_top)
         rim_top = under + options.saucer_rim_height_mm
         # outside past the disc: the cylinder below cuts it on the part's own side wall
@@ -276,7 +331,7 @@ def disc_part(block: object, scene: Scene, mm_per_unit: float, options: FabOptio
         seat_cs = cup_cs.offset(options.seat_clearance_mm + options.seat_rim_mm, m3d.JoinType.Round).simplify(
             OUTLINE_EPS_MM
         )
-        seat_top = options.seat_depth_mm
+        seat_top = clear_level(options.seat_depth_mm, block)
     parts.append(m3d.Manifold.extrude(seat_cs, seat_top - base).translate((0.0, 0.0, base)))
     cut = m3d.Manifold.extrude(inner, high)  # from the standing plane z = 0 up
     # the cylinder last: it trims a seat wider than the disc too (seat_ring_problem lists that)

@@ -465,7 +465,7 @@ def build_solid(
     top_z = 0.0
     pocket = np.zeros((0, 2))
     if disc:
-        part = disc_part(block, design.scene, s, opts, z_bottom, float(hmm.max()))
+        part = disc_part(block, design.scene, s, opts, z_bottom, float(hmm.max()), (xs, ys))
         solid, pocket, top_z = part.solid, part.pocket, part.top_z
         covered = rim_over_picture(design.scene, s, opts, xs, ys, hmm)
         if covered is not None:

@@ -174,7 +174,9 @@ def base_shape(name: str, n: int, seed: int = 0, saucer: Saucer | None = None) -
         # what the cup sees): a disc's direct picture is about half a rectangle's width, and a viewer's
         # eyes beside the design eye see the relief's parallax across it in proportion to its height
         # (benchmarks/RESULTS.md, "The default scene: rectangle, wide or round": +3 to +4 dB from those eyes)
-        v = RING_DENSITY * (1.0 - np.hypot(u - 0.5, v - 0.5))
+        # measured from the disc's edge, where every such shape is at its lowest: a crest the edge cut through
+        # would leave a fin of material thinner than any printer's wall between it and the part's side
+        v = RING_DENSITY * (saucer.radius - np.hypot(u - 0.5, v - 0.5))
         return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64) / RING_DENSITY
     return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64)
 

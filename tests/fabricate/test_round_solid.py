@@ -275,3 +275,32 @@ def test_a_malformed_outline_is_refused(design: Design, solids: dict[str, Solid]
     with pytest.raises(SceneFileError) as exc:
         scene_from_dict(bad, "scene.json")
     assert words in str(exc.value) and "scene.json" in str(exc.value)
+
+
+@pytest.mark.parametrize("n", [31, 61, 284])
+def test_the_disc_cut_keeps_clear_of_the_grid_and_leaves_no_sliver(n: int) -> None:
+    """A circle through grid vertices (31 and 61 a side: (9, 12) and (18, 24) steps from the centre lie on
+    it) or whose polygon passes a hair from them (284: the HP's 190 mm disc) would leave triangles a checker
+    calls zero-area;
+    the outline keeps GRID_GAP_MM from every grid vertex and the part has no triangle near that small."""
+    from saucerfab.fabricate.round_solid import GRID_GAP_MM, clear_outline_mm, grid_gap_mm
+    from saucerfab.fabricate.solid import footprint_on_clipper_grid
+    from saucerfab.model.heightfield import make_grid
+
+    diameter = 1.9 if n == 284 else 2.0
+    scene = replace(round_scene(), saucer=disc_saucer(diameter, n))
+    s = scene.mm_per_unit
+    grid = make_grid(scene.saucer)
+    _, xs, ys = footprint_on_clipper_grid(grid.xs * s, grid.ys * s)
+    radius = scene.saucer.radius * s
+    if n == 284:  # the case that failed `check --strict` before the outline kept clear (0.3 um from a vertex)
+        assert grid_gap_mm(disc_outline_mm(radius), xs, ys) < GRID_GAP_MM
+    outline = clear_outline_mm(radius, xs, ys)
+    assert grid_gap_mm(outline, xs, ys) >= GRID_GAP_MM
+    assert radius - np.hypot(*outline.T).max() < 0.05  # micrometres, not a visible change
+    d = synthetic_design(scene, resolution=n, texture_size=32, seed=4)
+    solid = build_solid(d, s, FabOptions())
+    t = solid.vertices[solid.faces]
+    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    diag = float(np.linalg.norm(np.ptp(solid.vertices, axis=0)))
+    assert area.min() > 1e-11 * diag * diag  # ten times `check`'s zero-area bound (1e-12 diag^2)
