@@ -144,17 +144,22 @@ def clear_outline_mm(radius_mm: float, xs_mm: np.ndarray, ys_mm: np.ndarray) -> 
     return best
 
 
-def clear_level(z_mm: float, block: object) -> float:
-    """``z_mm`` raised by micrometres until no vertex of ``block`` (a manifold3d ``Manifold``) lies within
-    :data:`GRID_GAP_MM` of that height: the seat rim's flat top cuts the relief along its contour there, and
-    a contour passing a hair from a vertex leaves triangles a checker calls zero-area."""
-    z = np.asarray(block.to_mesh().vert_properties, np.float64)[:, 2]
-    level = float(z_mm)
-    for _ in range(NUDGE_STEPS):
-        if not (np.abs(z - level) < GRID_GAP_MM).any():
+def clear_level(z_mm: float, block: object, reach_mm: float) -> float:
+    """``z_mm`` raised by micrometres until no vertex of ``block`` (a manifold3d ``Manifold``, model mm) within
+    ``reach_mm`` of the cup's axis lies within :data:`GRID_GAP_MM` of that height (of :data:`NUDGE_STEPS`
+    tries, the clearest): the seat rim's flat top cuts the relief along its contour there, and a contour
+    passing a hair from a vertex leaves triangles a checker calls zero-area."""
+    v = np.asarray(block.to_mesh().vert_properties, np.float64)
+    z = v[np.hypot(v[:, 0], v[:, 1]) <= reach_mm, 2]
+    best, best_gap = float(z_mm), -1.0
+    for k in range(NUDGE_STEPS + 1):
+        level = float(z_mm) + k * NUDGE_MM
+        gap = float(np.abs(z - level).min()) if z.size else math.inf
+        if gap > best_gap:
+            best, best_gap = level, gap
+        if gap >= GRID_GAP_MM:
             break
-        level += NUDGE_MM
-    return level
+    return best
 
 
 def seat_base_z(z_bottom: float, options: FabOptions) -> float:
@@ -331,7 +336,10 @@ def disc_part(block: object, scene: Scene, mm_per_unit: float, options: FabOptio
         seat_cs = cup_cs.offset(options.seat_clearance_mm + options.seat_rim_mm, m3d.JoinType.Round).simplify(
             OUTLINE_EPS_MM
         )
-        seat_top = clear_level(options.seat_depth_mm, block)
+        step = float(grid_mm[0][1] - grid_mm[0][0]) if grid_mm is not None else 1.0
+        # the relief's vertices of the cells the seat's outline crosses: up to two grid steps past it
+        reach = scene.cup.circumradius * s + options.seat_clearance_mm + options.seat_rim_mm + 2.0 * step
+        seat_top = clear_level(options.seat_depth_mm, block, reach)
     parts.append(m3d.Manifold.extrude(seat_cs, seat_top - base).translate((0.0, 0.0, base)))
     cut = m3d.Manifold.extrude(inner, high)  # from the standing plane z = 0 up
     # the cylinder last: it trims a seat wider than the disc too (seat_ring_problem lists that)

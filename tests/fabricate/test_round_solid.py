@@ -299,8 +299,31 @@ def test_the_disc_cut_keeps_clear_of_the_grid_and_leaves_no_sliver(n: int) -> No
     assert grid_gap_mm(outline, xs, ys) >= GRID_GAP_MM
     assert radius - np.hypot(*outline.T).max() < 0.05  # micrometres, not a visible change
     d = synthetic_design(scene, resolution=n, texture_size=32, seed=4)
+    d = replace(d, heights=d.base_heights.copy())  # the base shape without the random bumps, as a design's
     solid = build_solid(d, s, FabOptions())
     t = solid.vertices[solid.faces]
     area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
     diag = float(np.linalg.norm(np.ptp(solid.vertices, axis=0)))
     assert area.min() > 1e-11 * diag * diag  # ten times `check`'s zero-area bound (1e-12 diag^2)
+
+
+def test_the_seat_rims_top_keeps_clear_of_the_relief_heights_around_it() -> None:
+    """The rim's flat top cuts the relief along a contour; its level keeps GRID_GAP_MM from every relief height
+    near the seat (a contour a hair from a vertex left a zero-area triangle on astronaut-rocket's 200 mm disc)."""
+    from saucerfab.fabricate.round_solid import GRID_GAP_MM, NUDGE_MM, NUDGE_STEPS
+
+    scene = replace(round_scene(), saucer=disc_saucer(2.0, 61))
+    d = synthetic_design(scene, resolution=61, texture_size=32, seed=5)
+    opts = FabOptions()
+    s = scene.mm_per_unit
+    # put relief vertices beside the seat at exactly the rim's height above the floor: the worst case
+    g = np.linspace(-scene.saucer.radius, scene.saucer.radius, 61)
+    r = np.hypot(*np.meshgrid(g, g))
+    ring = (r * s > scene.cup.circumradius * s + 3.0) & (r * s < scene.cup.circumradius * s + 6.0)
+    heights = d.heights.copy()
+    heights[ring] = opts.seat_depth_mm / s
+    solid = build_solid(replace(d, heights=heights), s, opts)
+    level = solid.seat.top_z - solid.seat.floor_z
+    assert opts.seat_depth_mm < level <= opts.seat_depth_mm + NUDGE_STEPS * NUDGE_MM + 1e-9
+    near = (solid.heights - solid.seat.floor_z)[ring]
+    assert np.abs(near - level).min() >= GRID_GAP_MM - 1e-9
