@@ -69,8 +69,8 @@ def main() -> int:
                 rc_e, t_e = run(["export", str(folder), "--printer", key, "-o", str(out), "--no-verify", "-q"])
                 rc_c, _ = run(["check", "--strict", "--printer", key, "-q", str(out)]) if rc_e == 0 else (None, 0.0)
                 failures += int(rc_e != 0 or rc_c != 0)
-                print(f"| {pair} | {key} | {mm:.0f} | {secs:.0f}{'' if made_for == key or key == 'j55' else ' (j55)'} | "
-                      f"{rc_e} ({t_e:.0f}) | {rc_c} |", flush=True)
+                whose = "" if made_for == key else f" ({made_for})"
+                print(f"| {pair} | {key} | {mm:.0f} | {secs:.0f}{whose} | {rc_e} ({t_e:.0f}) | {rc_c} |", flush=True)
     print(f"\n{failures} failure(s)")
     return 1 if failures else 0
 
