@@ -21,7 +21,7 @@ import numpy as np
 from saucerfab.errors import ConfigError, MaskError
 from saucerfab.files.fileio import sha256_file
 from saucerfab.model.cups import parse_cup_spec
-from saucerfab.model.scene import VIEW_NAMES, Scene, disc_saucer, load_scene, round_grid
+from saucerfab.model.scene import VIEW_NAMES, Saucer, Scene, disc_saucer, load_scene, round_grid
 from saucerfab.optimize.printable import PrintTarget, preflight, print_target
 from saucerfab.optimize.request import DesignRequest
 
@@ -96,7 +96,7 @@ def _round_saucer(scene: Scene, request: DesignRequest) -> Scene:
 
     One step, not three: a scene with the preset's disc around the request's cup could be refused
     before the disc the request asks for is in place. The disc's grid is
-    :func:`~saucerfab.model.scene.round_grid`'s (``build_scene`` lays a given resolution over it).
+    :func:`~saucerfab.model.scene.round_grid`'s, or the request's resolution.
     """
     if not scene.saucer.is_disc:
         raise ConfigError(
@@ -106,8 +106,13 @@ def _round_saucer(scene: Scene, request: DesignRequest) -> Scene:
     cup = parse_cup_spec(request.cup) if request.cup else scene.cup
     cup_mm = scene.cup_diameter_mm if request.cup_diameter_mm is None else float(request.cup_diameter_mm)
     diameter = float(request.saucer_diameter_mm) * cup.width_units / cup_mm  # mm -> model units at this scale
-    saucer = disc_saucer(diameter, round_grid(diameter), scene.saucer.delta)
-    return replace(scene, cup=cup, cup_diameter_mm=cup_mm, saucer=saucer)
+    return replace(scene, cup=cup, cup_diameter_mm=cup_mm, saucer=_disc(scene, diameter, request))
+
+
+def _disc(scene: Scene, diameter: float, request: DesignRequest) -> Saucer:
+    """``scene``'s disc rebuilt ``diameter`` model units across: its grid at the paper's step, or the request's."""
+    n = request.resolution if request.resolution is not None else round_grid(diameter)
+    return disc_saucer(diameter, int(n), scene.saucer.delta)
 
 
 def _disc_for_printer(scene: Scene, request: DesignRequest, target: PrintTarget) -> tuple[Scene, list[str]]:
@@ -120,9 +125,7 @@ def _disc_for_printer(scene: Scene, request: DesignRequest, target: PrintTarget)
     largest = math.floor(min(target.profile.build_volume_mm[:2]) + 1e-9)
     if across <= largest:
         return scene, []
-    d = largest / s
-    n = request.resolution if request.resolution is not None else round_grid(d)
-    fitted = replace(scene, saucer=disc_saucer(d, int(n), scene.saucer.delta))  # too small: the scene's own error
+    fitted = replace(scene, saucer=_disc(scene, largest / s, request))  # too small: the scene's own error
     return fitted, [f"the round saucer is {largest:g} mm across, the largest {target.profile.name}'s build area takes "
                     f"(the scene's is {across:.0f} mm; --saucer-diameter-mm sets it)"]
 
