@@ -73,9 +73,10 @@ from saucerfab.fabricate.seat import (
     seat_wall,
 )
 from saucerfab.model.design import Design
+from saucerfab.model.footprint import part_edge
 from saucerfab.model.heightfield import make_grid, triangulate
 from saucerfab.model.profiles import PrinterProfile
-from saucerfab.model.relief import WALL_MARGIN, crest_widths, wall_widths
+from saucerfab.model.relief import WALL_MARGIN, crest_widths, lower_beyond_edge, wall_widths
 
 #: manifold's merge tolerance, mm: far below printer resolution, far above
 #: the 10 nm rounding of written coordinates, so no two distinct vertices
@@ -177,12 +178,14 @@ class Solid:
 
 
 def check_features(
-    heights_mm: np.ndarray, xs_mm: np.ndarray, ys_mm: np.ndarray, min_feature_mm: float
+    heights_mm: np.ndarray, xs_mm: np.ndarray, ys_mm: np.ndarray, min_feature_mm: float,
+    edge: np.ndarray | None = None,
 ) -> FeatureReport:
-    """Crests thinner than ``min_feature_mm`` (and at least that tall)."""
+    """Crests thinner than ``min_feature_mm`` (and at least that tall); ``edge``: a round part's edge across
+    the grid (:func:`saucerfab.model.footprint.part_edge`)."""
     dx = float(xs_mm[1] - xs_mm[0])
     dy = float(ys_mm[1] - ys_mm[0])
-    w = crest_widths(heights_mm, dx, dy, min_feature_mm)
+    w = crest_widths(heights_mm, dx, dy, min_feature_mm, edge)
     thin = w < min_feature_mm
     if not np.isfinite(w).any():
         return FeatureReport(0, math.inf, None)
@@ -327,7 +330,8 @@ def seat_prism(cs, z0: float, z1: float, xs_mm: np.ndarray, ys_mm: np.ndarray): 
 
 
 def _blunt_for(
-    profile: PrinterProfile, design: Design, hmm: np.ndarray, xs: np.ndarray, ys: np.ndarray, s: float
+    profile: PrinterProfile, design: Design, hmm: np.ndarray, xs: np.ndarray, ys: np.ndarray, s: float,
+    edge: np.ndarray | None = None,
 ) -> tuple[np.ndarray, str]:
     """``hmm`` with the crests under ``profile``'s minimum feature blunted, and what was done.
 
@@ -347,7 +351,8 @@ def _blunt_for(
     base = np.asarray(design.base_heights, np.float64) * s
     d = design.scene.saucer.delta * s
     lo, hi = np.minimum(base - d, hmm), np.maximum(base + d, hmm)
-    res = blunt_thin_crests(hmm, dx, dy, profile.min_feature_mm, lo, hi, min_wall=profile.min_wall_mm)
+    res = blunt_thin_crests(hmm, dx, dy, profile.min_feature_mm, lo, hi, min_wall=profile.min_wall_mm,
+                            edge=edge)
     if not res.changed:
         return hmm, ""
     made_for = str(design.parameters.get("printer") or "no printer (an older design)")
@@ -404,6 +409,9 @@ def build_solid(
     s = float(mm_per_unit)
     footprint, xs, ys = footprint_on_clipper_grid(grid.xs * s, grid.ys * s)
     hmm = np.asarray(design.heights, np.float64) * s
+    edge = part_edge(design.scene.saucer)  # a round saucer's edge across the grid (its corners are cut away)
+    if edge is not None:
+        hmm = lower_beyond_edge(hmm, edge)  # no face rises into the cut: no fin at the edge
     z_bottom = min(-opts.base_thickness_mm, float(hmm.min()) - opts.min_thickness_mm)
 
     warnings: list[str] = []
@@ -421,10 +429,10 @@ def build_solid(
         sw = seat_wall(design.scene, s, opts, wall)
         if sw is not None and sw.thin:
             problems.append(f"{sw.problem()}: use --cup-diameter-mm {sw.smallest_cup_mm} or more, or --seat none")
-        hmm, blunted = _blunt_for(profile, design, hmm, xs, ys, s)
+        hmm, blunted = _blunt_for(profile, design, hmm, xs, ys, s, edge)
         if blunted:
             warnings.append(blunted)
-        features = check_features(hmm, xs, ys, profile.min_feature_mm)
+        features = check_features(hmm, xs, ys, profile.min_feature_mm, edge)
         if features.count:
             x, y = features.worst_xy_mm or (0.0, 0.0)
             problems.append(
@@ -433,7 +441,8 @@ def build_solid(
                 f"half height, model-mm x={x:.2f} y={y:.2f}) and the design's height bound leaves no room "
                 "to blunt them; they may print blunted"
             )
-        walls = int((wall_widths(hmm, float(xs[1] - xs[0]), float(ys[1] - ys[0]), wall) < WALL_MARGIN * wall).sum())
+        ww = wall_widths(hmm, float(xs[1] - xs[0]), float(ys[1] - ys[0]), wall, edge=edge)
+        walls = int((ww < WALL_MARGIN * wall).sum())
         if walls:
             problems.append(
                 f"{walls} relief crests are walls thinner than {WALL_MARGIN:g} x the minimum wall {wall:g} mm "

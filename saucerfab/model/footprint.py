@@ -23,7 +23,9 @@ from __future__ import annotations
 import numpy as np
 
 from saucerfab.model.cups import Cup
-from saucerfab.model.scene import Scene
+from saucerfab.model.heightfield import make_grid
+from saucerfab.model.relief import edge_lines
+from saucerfab.model.scene import Saucer, Scene
 
 #: directions in which a vertex is tested against the cup's footprint when growing it by the ring
 RING_DIRECTIONS = 16
@@ -53,6 +55,22 @@ def in_grown_footprint(cup: Cup, xy: np.ndarray, ring: float) -> np.ndarray:
 def near_cup(scene: Scene, xy: np.ndarray) -> np.ndarray:
     """(P,) bool: the points (P, 2) lie in the cup's footprint grown by its ring (``Scene.cup_ring_units``)."""
     return in_grown_footprint(scene.cup, xy, scene.cup_ring_units)
+
+
+def part_edge(saucer: Saucer) -> np.ndarray | None:
+    """The relief rules' table of a disc's edge across its grid (:func:`saucerfab.model.relief.edge_lines`).
+
+    The grid's vertices off the disc (its corners, which the export cuts away)
+    with the disc's outward normal (radial) at each: (3, N, N) float64. None on
+    a rectangle (the grid's border is its edge).
+    """
+    if not saucer.is_disc:
+        return None
+    grid = make_grid(saucer)
+    gx, gy = np.meshgrid(grid.xs, grid.ys)  # row i at ys[i], as the heights
+    off = ~saucer.on_saucer(np.stack([gx.ravel(), gy.ravel()], axis=1)).reshape(gx.shape)
+    r = np.maximum(np.hypot(gx, gy), 1e-12)  # off the disc r > its radius; the guard is for the centre
+    return edge_lines(off, np.stack([gx / r, gy / r], axis=-1), *grid.spacing)
 
 
 def design_vertices(scene: Scene, xy: np.ndarray) -> np.ndarray:

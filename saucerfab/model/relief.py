@@ -37,6 +37,14 @@ of material at least that thick is relief, not a wall), written on the grid.
 The projection lowers such a crest (bisection on its height) until the rule
 holds.
 
+A part cut from the grid by an outline across its cells (a round saucer:
+the disc inscribed in the square grid) has its side at the outline, not at
+the grid's border. The rules take an ``edge`` table (:func:`edge_lines`):
+beyond the outline a vertex reads as the side's drop on a line that crosses
+it nearly square on, and as open on an oblique one, and is never a crest
+itself; the export lowers those vertices (:func:`lower_beyond_edge`) so that
+no face rises into the cut, which would leave a lip no rule on the grid sees.
+
 Units: any length unit, the same for heights and spacings (the optimizer
 works in model units, the export in millimetres).
 
@@ -90,7 +98,8 @@ def _lines(h: np.ndarray, dx: float, dy: float) -> tuple[tuple[np.ndarray, np.nd
 
 
 def feature_crests_reference(
-    h: np.ndarray, dx: float, dy: float, crest_p: float, feature_w: float, keep: float
+    h: np.ndarray, dx: float, dy: float, crest_p: float, feature_w: float, keep: float,
+    edge: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The feature rule's findings on every interior vertex, in whole-grid numpy passes.
 
@@ -102,7 +111,9 @@ def feature_crests_reference(
 
     Args:
         h: (N, M) float64 heights. dx, dy: grid spacing. keep: how far above the
-            higher neighbour a thin crest is lowered to.
+            higher neighbour a thin crest is lowered to. edge: (3, N, M), the
+            part's edge across the grid (:func:`edge_lines`): no vertex beyond
+            it is a crest, nor one on a line to it (the wall rule judges the edge).
 
     Returns:
         ``target`` (N-2, M-2): the height each thin crest is lowered to (the
@@ -111,14 +122,15 @@ def feature_crests_reference(
         line's first neighbour is at least as high as its second.
     """
     c = h[1:-1, 1:-1]
+    off = _off(edge, h.shape)
     target = np.full(c.shape, np.inf)
     thin_lines, a_higher = [], []
-    for a, b, length, _ in _lines(h, dx, dy):
+    for (a, b, length, _), (off_a, off_b, _, _) in zip(_lines(h, dx, dy), _lines(off, dx, dy), strict=True):
         m = np.maximum(a, b)
         p = c - m
         with np.errstate(divide="ignore", invalid="ignore"):
             w = length * 0.5 * p * (1.0 / (c - a) + 1.0 / (c - b))
-        thin = (p >= crest_p) & (w < feature_w)
+        thin = (p >= crest_p) & (w < feature_w) & ~(off[1:-1, 1:-1] | off_a | off_b)
         target = np.where(thin, np.minimum(target, m + keep), target)
         thin_lines.append(thin)
         a_higher.append(a >= b)
@@ -126,24 +138,28 @@ def feature_crests_reference(
 
 
 def _feature_crests(
-    h: np.ndarray, dx: float, dy: float, crest_p: float, feature_w: float, keep: float
+    h: np.ndarray, dx: float, dy: float, crest_p: float, feature_w: float, keep: float,
+    edge: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`feature_crests_reference` by the numba kernel (one pass over the vertices)."""
     from saucerfab.model.relief_kernels import feature_crests
 
     # the lines' lengths in _lines' order, which the kernel's offsets (_DI, _DJ) follow
     lengths = np.array([length for _, _, length, _ in _lines(h, dx, dy)], np.float64)
-    return feature_crests(np.ascontiguousarray(h, np.float64), lengths, float(crest_p), float(feature_w),
-                          float(keep))
+    return feature_crests(np.ascontiguousarray(h, np.float64), _kernel_edge(edge, h.shape), lengths, float(crest_p),
+                          float(feature_w), float(keep))
 
 
-def crest_widths(heights: np.ndarray, dx: float, dy: float, min_height: float) -> np.ndarray:
+def crest_widths(heights: np.ndarray, dx: float, dy: float, min_height: float,
+                 edge: np.ndarray | None = None) -> np.ndarray:
     """Width at half prominence of each crest vertex; ``inf`` where there is none.
 
     Args:
         heights: (N, M) heights, rows along y.
         dx, dy: grid spacing along x (columns) and y (rows), same unit.
         min_height: prominence below which a crest is ignored (the minimum feature).
+        edge: (3, N, M), the part's edge across the grid (:func:`edge_lines`;
+            as :func:`feature_crests_reference`). None: all part.
 
     Returns:
         (N, M) float64 widths (``inf`` for non-crests and the border), the
@@ -152,10 +168,11 @@ def crest_widths(heights: np.ndarray, dx: float, dy: float, min_height: float) -
     h = np.asarray(heights, np.float64)
     width = np.full(h.shape, np.inf)
     c = h[1:-1, 1:-1]
+    off = _off(edge, h.shape)
     inner = width[1:-1, 1:-1]
-    for a, b, length, _ in _lines(h, dx, dy):
+    for (a, b, length, _), (off_a, off_b, _, _) in zip(_lines(h, dx, dy), _lines(off, dx, dy), strict=True):
         p = c - np.maximum(a, b)
-        crest = p >= min_height
+        crest = (p >= min_height) & ~(off[1:-1, 1:-1] | off_a | off_b)
         with np.errstate(divide="ignore", invalid="ignore"):
             w = length * 0.5 * p * (1.0 / (c - a) + 1.0 / (c - b))
         inner[...] = np.where(crest, np.minimum(inner, w), inner)
@@ -172,6 +189,106 @@ _OPEN = 1e30
 
 #: the three mesh lines: (di, dj, which spacing, what lies beyond the border)
 _WALL_LINES = ((0, 1, "x", _WALL), (1, 0, "y", _WALL), (1, 1, "xy", _OPEN))
+
+
+#: a line crossing the part's edge within this angle of square on reads the vertex beyond it as
+#: the side wall; a more oblique one as open (the material beside the edge is as thick as the
+#: squarer line through it says, as the diagonal at a rectangle's border). One of the three mesh
+#: lines is always within 22.5 degrees of square on.
+EDGE_SQUARE_DEG = 45.0
+
+
+def edge_lines(off_part: np.ndarray, outward: np.ndarray, dx: float, dy: float) -> np.ndarray:
+    """What each vertex beyond a part's edge reads as on each mesh line (the rules' ``edge``).
+
+    A part cut from the grid by an outline across its cells (a round saucer)
+    ends in a vertical side wall at the outline. The rules read a vertex
+    beyond it, on a line that crosses the outline nearly square on, as the
+    drop of that wall (as beyond the grid's border, :data:`_WALL`), and on an
+    oblique line as "higher" (:data:`_OPEN`: no crest on that line), which
+    keeps a vertex at the outline's tangent points from reading as a wall
+    of no width between two drops.
+
+    Args:
+        off_part: (N, M) bool, the vertices beyond the edge.
+        outward: (N, M, 2) the outline's outward normal (x, y) near each vertex
+            (a disc: the unit radial direction); read only beyond the edge.
+        dx, dy: grid spacing along x (columns) and y (rows).
+
+    Returns:
+        (3, N, M) float64 per line of :data:`_WALL_LINES`: NaN on the part,
+        :data:`_WALL` or :data:`_OPEN` beyond it.
+    """
+    off = np.asarray(off_part, bool)
+    n = np.asarray(outward, np.float64)
+    if n.shape != off.shape + (2,):
+        raise ValueError(f"outward is {n.shape}, expected {off.shape + (2,)}")
+    square = math.cos(math.radians(EDGE_SQUARE_DEG)) + 1e-9  # exactly 45 degrees is oblique, as at a border
+    out = np.full((len(_WALL_LINES),) + off.shape, np.nan)
+    for k, (di, dj, _, _) in enumerate(_WALL_LINES):
+        d = np.array([dj * dx, di * dy]) / math.hypot(dj * dx, di * dy)
+        across = np.abs(n[..., 0] * d[0] + n[..., 1] * d[1]) >= square
+        out[k] = np.where(off, np.where(across, _WALL, _OPEN), np.nan)
+    return out
+
+
+#: the kernels' table of a grid that is all part (its border is its edge): read as no edge at all
+_NO_EDGE = np.full((len(_WALL_LINES), 1, 1), np.nan)
+
+
+def _edge(edge: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
+    """(3, N, M) float64 :func:`edge_lines` table, or all NaN (a grid that is all part)."""
+    if edge is None:
+        return np.full((len(_WALL_LINES),) + tuple(shape), np.nan)
+    e = np.ascontiguousarray(edge, np.float64)
+    if e.shape != (len(_WALL_LINES),) + tuple(shape):
+        raise ValueError(f"edge is {e.shape}, expected {(len(_WALL_LINES),) + tuple(shape)} (edge_lines)")
+    return e
+
+
+def _read_on(h: np.ndarray, edge: np.ndarray, line: int) -> np.ndarray:
+    """(N, M) the heights as ``line`` reads them: beyond the part's edge, the ``edge`` table's wall or opening."""
+    return np.where(np.isnan(edge[line]), h, edge[line])
+
+
+def _kernel_edge(edge: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
+    """The kernels' ``edge``: the checked table, or :data:`_NO_EDGE` (no table to read on every step)."""
+    return _NO_EDGE if edge is None else _edge(edge, shape)
+
+
+def _off(edge: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
+    """(N, M) bool: the vertices beyond the part's edge in an :func:`edge_lines` table."""
+    return ~np.isnan(_edge(edge, shape)[0])
+
+
+def lower_beyond_edge(heights: np.ndarray, edge: np.ndarray) -> np.ndarray:
+    """``heights`` with each vertex beyond the part's edge no higher than its lowest neighbour on the part.
+
+    A part cut from the grid by an outline across its cells (a round saucer)
+    keeps the faces that straddle the outline up to it. Where such a face rose
+    outwards, the cut left a lip: the face's slope and the vertical side meet
+    at an acute edge, a fin thinner than any printer's wall (a design's 0.014 mm
+    at a round saucer's edge). Lowered so, every straddling face falls or stays
+    level towards the side, and the part's edge is the vertical wall that
+    :func:`wall_widths` reads beyond ``edge``. Vertices with no neighbour on
+    the part are cut away whole and kept as they are.
+
+    Args:
+        heights: (N, M) heights. edge: (3, N, M), the part's edge across the grid (:func:`edge_lines`).
+    Returns:
+        (N, M) float64 heights; the part's own vertices unchanged.
+    """
+    h = np.asarray(heights, np.float64)
+    off = _off(edge, h.shape)
+    on = np.where(off, np.inf, h)
+    padded = np.pad(on, 1, constant_values=np.inf)
+    rows, cols = h.shape
+    lowest = np.full(h.shape, np.inf)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di or dj:
+                lowest = np.minimum(lowest, padded[1 + di:1 + di + rows, 1 + dj:1 + dj + cols])
+    return np.where(off & np.isfinite(lowest), np.minimum(h, lowest), h)
 
 
 def _length(which: str, dx: float, dy: float) -> float:
@@ -229,7 +346,8 @@ def _line_tables(dx: float, dy: float) -> tuple[np.ndarray, np.ndarray]:
             np.array([beyond for _, _, _, beyond in _WALL_LINES]))
 
 
-def wall_widths(heights: np.ndarray, dx: float, dy: float, depth: float, rise_tol: float = 0.0) -> np.ndarray:
+def wall_widths(heights: np.ndarray, dx: float, dy: float, depth: float, rise_tol: float = 0.0,
+                edge: np.ndarray | None = None) -> np.ndarray:
     """Width of each crest at ``depth`` below its top (the wall rule); ``inf`` where it is no crest.
 
     Args:
@@ -237,6 +355,10 @@ def wall_widths(heights: np.ndarray, dx: float, dy: float, depth: float, rise_to
         dx, dy: grid spacing along x (columns) and y (rows).
         depth: the minimum wall.
         rise_tol: how far above a crest a neighbour must be to end it (:func:`_walk_width`).
+        edge: (3, N, M), the part's edge across the grid (a round saucer's
+            corners, :func:`edge_lines`): the vertices beyond it are read as
+            beyond a border, and are no crest themselves (the export lowers
+            them so, :func:`lower_beyond_edge`). None: all part.
 
     Returns:
         (N, M) float64 widths, the smallest over the three mesh lines, border
@@ -247,26 +369,28 @@ def wall_widths(heights: np.ndarray, dx: float, dy: float, depth: float, rise_to
     from saucerfab.model.relief_kernels import wall_widths_grid
 
     lengths, beyond = _line_tables(dx, dy)
-    return wall_widths_grid(np.ascontiguousarray(heights, np.float64), float(depth), lengths, beyond,
+    h = np.ascontiguousarray(heights, np.float64)
+    return wall_widths_grid(h, _kernel_edge(edge, h.shape), float(depth), lengths, beyond,
                             _wall_steps(depth * WALL_MARGIN, dx, dy), float(rise_tol))
 
 
 def wall_widths_reference(heights: np.ndarray, dx: float, dy: float, depth: float,
-                          rise_tol: float = 0.0) -> np.ndarray:
+                          rise_tol: float = 0.0, edge: np.ndarray | None = None) -> np.ndarray:
     """:func:`wall_widths` in whole-grid numpy passes (the kernel's reference)."""
     h = np.asarray(heights, np.float64)
+    e = _edge(edge, h.shape)
     rows, cols = h.shape
     k_max = _wall_steps(depth * WALL_MARGIN, dx, dy)
     out = np.full(h.shape, np.inf)
-    for di, dj, which, beyond in _WALL_LINES:
-        hp = np.pad(h, k_max, constant_values=beyond)
+    for line, (di, dj, which, beyond) in enumerate(_WALL_LINES):
+        hp = np.pad(_read_on(h, e, line), k_max, constant_values=beyond)
 
         def shifted(side: int, k: int, _hp: np.ndarray = hp, _di: int = di, _dj: int = dj) -> np.ndarray:
             oi, oj = k_max + side * k * _di, k_max + side * k * _dj  # whole shifted views: no gathers
             return _hp[oi:oi + rows, oj:oj + cols]
 
         out = np.minimum(out, _walk_width(shifted, h, h - depth, _length(which, dx, dy), k_max, rise_tol=rise_tol))
-    return out
+    return np.where(np.isnan(e[0]), out, np.inf)
 
 
 #: bisection rounds of the wall rule's lowering (2**-30 of the search interval)
@@ -274,15 +398,17 @@ BISECT_ROUNDS = 30
 
 
 def bisect_tops_reference(h: np.ndarray, ii: np.ndarray, jj: np.ndarray, lo_vals: np.ndarray, depth: float,
-                          want: float, k: int, dx: float, dy: float) -> tuple[np.ndarray, np.ndarray]:
+                          want: float, k: int, dx: float, dy: float,
+                          edge: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per thin crest (ii, jj) the highest top at which it is ``want`` wide ``depth`` below, in numpy.
 
     The reference of :func:`saucerfab.model.relief_kernels.bisect_tops`: the
     neighbours stay at ``h``, a neighbour above the trial top counts as at it.
     Returns (lo_top (K,), ok_low (K,): wide enough at its lowest allowed top).
     """
-    padded = [(np.pad(h, k, constant_values=beyond), di, dj, _length(which, dx, dy))
-              for di, dj, which, beyond in _WALL_LINES]
+    e = _edge(edge, h.shape)
+    padded = [(np.pad(_read_on(h, e, line), k, constant_values=beyond), di, dj, _length(which, dx, dy))
+              for line, (di, dj, which, beyond) in enumerate(_WALL_LINES)]
     pi, pj = ii + k, jj + k
 
     def wide(top: np.ndarray) -> np.ndarray:
@@ -307,32 +433,34 @@ def bisect_tops_reference(h: np.ndarray, ii: np.ndarray, jj: np.ndarray, lo_vals
 
 
 def _bisect_tops(h: np.ndarray, ii: np.ndarray, jj: np.ndarray, lo_vals: np.ndarray, depth: float,
-                 want: float, k: int, dx: float, dy: float) -> tuple[np.ndarray, np.ndarray]:
+                 want: float, k: int, dx: float, dy: float,
+                 edge: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`bisect_tops_reference` by the numba kernel (the same float operations)."""
     from saucerfab.model.relief_kernels import bisect_tops
 
     lengths, beyond = _line_tables(dx, dy)
-    return bisect_tops(np.ascontiguousarray(h, np.float64), ii, jj, np.ascontiguousarray(lo_vals, np.float64),
+    return bisect_tops(np.ascontiguousarray(h, np.float64), _kernel_edge(edge, h.shape), ii, jj,
+                       np.ascontiguousarray(lo_vals, np.float64),
                        float(depth), float(want), k, lengths, beyond, BISECT_ROUNDS)
 
 
 def _lower_until_wide(h: np.ndarray, lo: np.ndarray, dx: float, dy: float, depth: float,
-                      want: float, rise_tol: float = 0.0,
-                      widths: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      want: float, rise_tol: float = 0.0, widths: np.ndarray | None = None,
+                      edge: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Lower each crest narrower than ``want`` at ``depth`` until it is ``WALL_SLACK`` wider (bisection).
 
     ``widths``: :func:`wall_widths` of ``h`` when the caller has them (they are not computed again).
     Returns (new h, stuck: crests even their lower bound leaves too narrow).
     """
     if widths is None:
-        widths = wall_widths(h, dx, dy, depth, rise_tol)
+        widths = wall_widths(h, dx, dy, depth, rise_tol, edge)
     thin = widths < want
     want = want * (1.0 + WALL_SLACK)  # so float32 rounding of the result cannot undo it
     k = _wall_steps(want, dx, dy)
     if not thin.any():
         return h, np.zeros(h.shape, bool)
     ii, jj = np.nonzero(thin)
-    lo_top, ok_low = _bisect_tops(h, ii, jj, lo[ii, jj], depth, want, k, dx, dy)
+    lo_top, ok_low = _bisect_tops(h, ii, jj, lo[ii, jj], depth, want, k, dx, dy, edge)
     out = h.copy()
     # a hair lower than the bisection's answer: the rule can jump there (a dip of exactly ``depth``
     # before a rise ends the crest), and the optimizer's float32 must not round back across it
@@ -379,6 +507,7 @@ def blunt_thin_crests(
     min_wall: float | None = None,
     tighten: float = 0.0,
     max_sweeps: int = MAX_SWEEPS,
+    edge: np.ndarray | None = None,
 ) -> BluntResult:
     """The heightfield with every crest thinner than ``min_feature`` blunted (module docstring).
 
@@ -397,6 +526,9 @@ def blunt_thin_crests(
             optimizer's float32 model units, the export's float64 mm) still
             meets them exactly (the optimizer uses :data:`OPTIMIZER_TIGHTEN`).
         max_sweeps: give up after this many sweeps (:data:`MAX_SWEEPS`).
+        edge: (3, N, M), the part's edge across the grid (a round saucer's
+            corners, :func:`edge_lines`): never crests, never moved, and read
+            as the part's side (:func:`wall_widths`). None: all part.
 
     Returns:
         a :class:`BluntResult`; ``remaining > 0`` when the bounds made the rule
@@ -417,10 +549,10 @@ def blunt_thin_crests(
     clean = False
     for sweeps in range(1, max_sweeps + 1):
         c = h[1:-1, 1:-1]
-        target, thin_lines, a_higher = _feature_crests(h, dx, dy, crest_p, feature_w, keep)
+        target, thin_lines, a_higher = _feature_crests(h, dx, dy, crest_p, feature_w, keep, edge)
         thin_any = thin_lines.any(axis=0)
         # the wall rule's widths, computed once per sweep (this runs on every trial step of the optimizer)
-        ww = None if min_wall is None else wall_widths(h, dx, dy, min_wall, rise)
+        ww = None if min_wall is None else wall_widths(h, dx, dy, min_wall, rise, edge)
         wall_thin = ww is not None and bool((ww < wall_w).any())
         if not thin_any.any() and not wall_thin:
             clean = True
@@ -454,15 +586,15 @@ def blunt_thin_crests(
             before_w = h.copy()
             # the widths still hold when the feature pass moved nothing
             h, _ = _lower_until_wide(h, lo_a, dx, dy, min_wall, wall_w, rise,
-                                     widths=None if thin_any.any() else ww)
+                                     widths=None if thin_any.any() else ww, edge=edge)
             down |= h < before_w
         if np.array_equal(h, prev):  # the bounds hold every thin crest where it is: no way out
             break
     remaining = 0
     if not clean:
-        bad = crest_widths(h, dx, dy, crest_p) < feature_w
+        bad = crest_widths(h, dx, dy, crest_p, edge) < feature_w
         if min_wall is not None:
-            bad |= wall_widths(h, dx, dy, min_wall, rise) < wall_w
+            bad |= wall_widths(h, dx, dy, min_wall, rise, edge) < wall_w
         remaining = int(bad.sum())
     change = np.abs(h - h0)
     return BluntResult(

@@ -27,6 +27,7 @@ import numpy as np
 from saucerfab.errors import ConfigError
 from saucerfab.fabricate.options import FabOptions
 from saucerfab.fabricate.seat import seat_ring_problem, seat_wall
+from saucerfab.model.footprint import part_edge
 from saucerfab.model.heightfield import make_grid
 from saucerfab.model.profiles import DEFAULT_PRINTER, PrinterProfile, load_profile
 from saucerfab.model.relief import OPTIMIZER_TIGHTEN, blunt_thin_crests
@@ -230,6 +231,7 @@ class CrestProjection:
     refused: int = 0
     max_change_units: float = 0.0
     _n: int = field(init=False, default=0)
+    edge: np.ndarray | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
         self._n = int(self.base.shape[0])
@@ -238,6 +240,7 @@ class CrestProjection:
         d = self.scene.saucer.delta
         self._lo = self.base - d * (1.0 - BOUND_MARGIN)
         self._hi = self.base + d * (1.0 - BOUND_MARGIN)
+        self.edge = part_edge(self.scene.saucer)  # a round saucer's edge across the grid, for the rules
 
     def blunt(self, heights: np.ndarray):  # -> saucerfab.model.relief.BluntResult
         """:func:`saucerfab.model.relief.blunt_thin_crests` of (N, N) ``heights`` within this design's bounds."""
@@ -246,7 +249,8 @@ class CrestProjection:
         lo = np.minimum(self._lo, h)
         hi = np.maximum(self._hi, h)
         return blunt_thin_crests(h, self._dx, self._dy, self.target.min_feature_units, lo, hi,
-                                 min_wall=self.target.min_wall_units, tighten=OPTIMIZER_TIGHTEN)
+                                 min_wall=self.target.min_wall_units, tighten=OPTIMIZER_TIGHTEN,
+                                 edge=self.edge)
 
     def __call__(self, h: Any) -> Any:
         """(V,) torch heights -> (V,) torch heights with no thin crest (same dtype)."""
@@ -276,15 +280,15 @@ class CrestProjection:
         }
 
 
-def printable_metrics(target: PrintTarget, heights: np.ndarray, project: Any) -> dict[str, Any]:
+def printable_metrics(target: PrintTarget, heights: np.ndarray, project: CrestProjection) -> dict[str, Any]:
     """The final heights against the printer's minimum feature (``metrics.printable`` of design.json)."""
     from saucerfab.model.relief import WALL_MARGIN, crest_widths, wall_widths
 
     dx, dy = target.spacing_mm
     hmm = np.asarray(heights) * target.mm_per_unit
     p = target.profile
-    w = crest_widths(hmm, dx, dy, p.min_feature_mm)
-    ww = wall_widths(hmm, dx, dy, p.min_wall_mm)
+    w = crest_widths(hmm, dx, dy, p.min_feature_mm, project.edge)
+    ww = wall_widths(hmm, dx, dy, p.min_wall_mm, edge=project.edge)
     out: dict[str, Any] = {
         "printer": p.key,
         "thin_crest_vertices": int((w < p.min_feature_mm).sum()),
@@ -293,6 +297,5 @@ def printable_metrics(target: PrintTarget, heights: np.ndarray, project: Any) ->
         "narrowest_crest_at_min_wall_mm": float(ww.min()) if np.isfinite(ww).any() else None,
         "crests_can_be_thin": target.crests_can_be_thin,
     }
-    if project is not None:
-        out.update(project.stats())
+    out.update(project.stats())
     return out

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 from test_fabricate_solid import assert_closed_manifold
 from test_round_export import loud, read_3mf_strict
+from test_round_export import round_design as printable_round_design
 from test_round_solid import centre_of, radius_mm, round_design
 
 from saucerfab.cli import main
@@ -82,12 +83,14 @@ def test_the_rims_top_stands_the_asked_height_over_the_relief_under_it(
     # the rim's top is flat: every rim vertex above the relief's own top is at that height
     assert np.allclose(rimmed.vertices[on_rim & (rimmed.vertices[:, 2] > plain.heights.max()), 2], top)
     # the relief under the ring, from the part without a rim: its top vertices in the ring are points of it;
-    # the tilt puts its highest point on the disc's edge (+x), where the part without a rim has a vertex
+    # the tilt puts its highest point at the disc's edge (+x): its last grid vertex there (the faces beyond
+    # it fall to the cut, lower_beyond_edge)
     relief = top_vertices(plain)
     d = radial(plain, relief)
     in_ring = (d >= r - WIDTH) & (d <= r + 1e-5)
     under = relief[in_ring, 2].max()
-    assert relief[in_ring][np.argmax(relief[in_ring, 2]), 0] > centre_of(plain)[0] + r - 1.0
+    step = float(plain.grid_x[1] - plain.grid_x[0])
+    assert relief[in_ring][np.argmax(relief[in_ring, 2]), 0] > centre_of(plain)[0] + r - step - 1e-6
     assert under > relief[:, 2].min() + 1.0
     assert top == pytest.approx(under + HEIGHT, abs=1e-5)  # the coordinates' rounding
 
@@ -214,7 +217,7 @@ def test_a_rim_under_the_minimum_wall_is_a_problem(design: Design) -> None:
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return save_design(round_design(), tmp_path_factory.mktemp("rim") / "design")
+    return save_design(printable_round_design(), tmp_path_factory.mktemp("rim") / "design")
 
 
 def test_export_with_a_rim_checks_strict_and_reads_back(folder: Path, tmp_path: Path,

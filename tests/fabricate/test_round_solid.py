@@ -327,3 +327,34 @@ def test_the_seat_rims_top_keeps_clear_of_the_relief_heights_around_it() -> None
     assert opts.seat_depth_mm < level <= opts.seat_depth_mm + NUDGE_STEPS * NUDGE_MM + 1e-9
     near = (solid.heights - solid.seat.floor_z)[ring]
     assert np.abs(near - level).min() >= GRID_GAP_MM - 1e-9
+
+
+def test_no_fin_where_the_relief_rises_into_the_discs_cut(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Relief rising steeply outwards across the disc's edge (the grid's corner vertices beside it 4 mm up)
+    was cut into a lip thinner than any wall (0.014 mm on tree-note's J55 export, session 24); the export
+    lowers those vertices (lower_beyond_edge) and the checker finds no thin wall. Without the lowering it does."""
+    import trimesh
+
+    import saucerfab.fabricate.solid as solid_mod
+    from saucerfab.check import check_mesh
+
+    scene = replace(round_scene(), saucer=disc_saucer(DIAMETER, 61))
+    d = round_design(61, scene)
+    g = np.linspace(-scene.saucer.radius, scene.saucer.radius, 61)
+    r = np.hypot(*np.meshgrid(g, g))
+    step = g[1] - g[0]
+    beyond = (r > scene.saucer.radius) & (r < scene.saucer.radius + 1.5 * step)
+    heights = d.heights.copy()
+    heights[beyond] += 4.0 / scene.mm_per_unit
+    d = replace(d, heights=heights)
+    profile = load_profile("j55")
+
+    def thin_walls(tag: str) -> bool:
+        solid = build_solid(d, scene.mm_per_unit, FabOptions(), profile)
+        path = tmp_path / f"{tag}.stl"
+        trimesh.Trimesh(solid.vertices, solid.faces, process=False).export(path)
+        return "thin_walls" in check_mesh(path, printer=profile).codes
+
+    assert not thin_walls("lowered")
+    monkeypatch.setattr(solid_mod, "lower_beyond_edge", lambda h, edge: h)
+    assert thin_walls("as_designed")
