@@ -10,8 +10,13 @@ it is seen in. The texture is the input images side by side::
     +-----------+-----------+-------------+-----------+
 
 A face seen in both views takes its reflected-image coordinates, and the
-reflected panel's texels under it become the average of the two images'
-colours there (the paper's rule). Faces no frame sees but the
+reflected panel's texels under it become the mean of the two images'
+colours there weighted by the face's share of each view's picture (its
+samples in each; :data:`BOTH_WEIGHTING`): the colour that leaves the least
+squared error over both pictures. The paper's rule is the plain average,
+which paints a sliver the eye barely sees half in the other picture's
+colour however large it is in that picture (the dark specks of a photograph's
+reflected picture across a direct one). Faces no frame sees but the
 design eye sees around them (:mod:`saucerfab.optimize.surround`) take the
 background of the view they are seen in, from the last panel (stripes of
 those colours; FaceView.SURROUND). Faces seen in neither keep their
@@ -134,7 +139,8 @@ def texture_saucer(
     k = len(names) + (1 if surround else 0)
     t = images["direct"].shape[0]
     h = np.asarray(heights, np.float64).reshape(-1)
-    visible = visible_faces(rig, heights, supersample)
+    samples = rig.face_samples(heights, supersample)
+    visible = {name: n > 0 for name, n in samples.items()}
     face_view = classify_faces(visible)
     faces = rig.faces_np
     nf = faces.shape[0]
@@ -159,8 +165,8 @@ def texture_saucer(
         use = src[seen]
         face_uvs[use] = uv_r[seen]
         face_panel[use] = p
-        # Faces seen in both: average the two images under the face, in the
-        # reflected panel (paper: modify the reflected image's texels).
+        # Faces seen in both: the two images under the face, blended in the reflected
+        # panel (paper: modify the reflected image's texels), weighted by the face's samples
         both = seen & (face_view[src] == FaceView.BOTH)
         if both.any():
             tri_r = ndc_to_texel(ndc_r[view.faces.numpy()[both]], t)
@@ -168,12 +174,18 @@ def texture_saucer(
             tri_d = ndc_to_texel(ndc_d[faces[src[both]]], t)
             pos_d = np.einsum("kc,kcd->kd", bary, tri_d[ti])
             col_d = sample_bilinear(panels[0], pos_d)
+            w_d, w_r = _both_weights(samples["direct"][src[both]], samples[view.name][src[both]])
             flat = panels[p].reshape(-1, 3)
-            # a texel under several faces is averaged once, with the mean direct colour
+            # a texel under several faces is blended once: the faces' mean weights, the direct
+            # colours' mean by their weights
             cnt = np.bincount(pix, minlength=t * t).astype(np.float64)
-            acc = np.stack([np.bincount(pix, weights=col_d[:, c], minlength=t * t) for c in range(3)], 1)
+            wd = np.bincount(pix, weights=w_d[ti], minlength=t * t)
+            wr = np.bincount(pix, weights=w_r[ti], minlength=t * t)
+            acc = np.stack([np.bincount(pix, weights=w_d[ti] * col_d[:, c], minlength=t * t) for c in range(3)], 1)
             hit = cnt > 0
-            flat[hit] = 0.5 * (flat[hit] + acc[hit] / cnt[hit, None])
+            mean_d = acc[hit] / wd[hit, None]
+            share_d = (wd[hit] / (wd[hit] + wr[hit]))[:, None]
+            flat[hit] = (1.0 - share_d) * flat[hit] + share_d * mean_d
     if surround:  # the last panel, before the eyes' blend: its UVs are in k panels' units
         panels.append(_surround_panel(surround, face_uvs, face_panel, face_view, t, k))
     if eyes:  # (the surround's faces are not the frames': the blend leaves them)
@@ -187,6 +199,18 @@ def texture_saucer(
         np.clip(panel, 0, 255, out=panel)
         texture8[:, p * t:(p + 1) * t] = panel
     return TextureResult(texture8, face_uvs.astype(np.float32), face_view, face_panel)
+
+
+#: how a face seen in both views weighs them: "samples" (its share of each view's picture) or
+#: "even" (the paper's plain average)
+BOTH_WEIGHTING = "samples"
+
+
+def _both_weights(direct: np.ndarray, reflected: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K,) float64 weights of the direct and reflected colours of K faces seen in both, from their samples."""
+    if BOTH_WEIGHTING == "even":
+        return np.ones(direct.shape), np.ones(reflected.shape)
+    return direct.astype(np.float64), reflected.astype(np.float64)
 
 
 def _surround_panel(

@@ -171,7 +171,7 @@ class ViewMeshes:
                 )
             )
         self.views = [self.as_view(v) for v in self.views]
-        #: supersample -> (heights (V,), visibility) of the last :meth:`visible_faces` call
+        #: supersample -> (heights (V,), samples per face) of the last :meth:`face_samples` call
         self._visible_memo: dict[int, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
 
     def _gather(self, name: str, camera: Camera, keep_vertices: np.ndarray) -> ViewMesh:
@@ -188,33 +188,36 @@ class ViewMeshes:
 
     def visible_faces(self, heights: np.ndarray, supersample: int = 2) -> dict[str, np.ndarray]:
         """Per view, (F,) bool: saucer faces that cover a (super)sample of its picture (the rectangle of the
-        frame's ``extent``) in that view, at ``heights`` (N, N) or (V,).
+        frame's ``extent``) in that view, at ``heights`` (N, N) or (V,) (:meth:`face_samples` > 0)."""
+        return {name: n > 0 for name, n in self.face_samples(heights, supersample).items()}
 
-        The last result per ``supersample`` is kept (fresh copies are returned): a design's last
-        stage classifies its final heights and the texturing right after asks for the same, with
-        single-sampled looks in between.
+    def face_samples(self, heights: np.ndarray, supersample: int = 2) -> dict[str, np.ndarray]:
+        """Per view, (F,) int64: how many of the view's (super)samples inside its picture each saucer face covers.
+
+        A face's share of a view's picture, in samples of ``supersample`` x its render size per side:
+        what the texturing weighs a face seen in two views by. The last result per ``supersample`` is
+        kept (fresh copies are returned): a design's last stage classifies its final heights and the
+        texturing right after asks for the same, with single-sampled looks in between.
         """
         from saucerfab.render import rasterize_hard
 
         h = np.asarray(heights, np.float64).reshape(-1)
         kept = self._visible_memo.get(supersample)
         if kept is not None and np.array_equal(kept[0], h):
-            return {name: vis.copy() for name, vis in kept[1].items()}
+            return {name: n.copy() for name, n in kept[1].items()}
         out = {}
         for view in self.views:
-            vis = np.zeros(self.num_faces, bool)
+            count = np.zeros(self.num_faces, np.int64)
             if view.faces.shape[0]:
                 cam = view.camera.with_size(view.camera.image_size * supersample)
                 fid, _, _ = rasterize_hard(view.vertices_np(h), view.faces, cam)
                 extent = frame_extent(self.scene, view.name)
                 if extent != (1.0, 1.0):  # seen in the picture's rectangle: the square's padding is surround
                     fid = np.where(inside_extent(cam, extent), fid, -1)
-                # the view's faces hit by a sample, marked (np.unique would hash every sample: ~15 ms a view at 512 px)
-                hit = np.zeros(view.faces.shape[0], bool)
-                hit[fid[fid >= 0]] = True
-                vis[np.asarray(view.face_src)[hit]] = True
-            out[view.name] = vis
-        self._visible_memo[supersample] = (h.copy(), {name: vis.copy() for name, vis in out.items()})
+                hits = np.bincount(fid[fid >= 0], minlength=view.faces.shape[0])
+                np.add.at(count, np.asarray(view.face_src), hits)  # a face mirrored twice (a prism) adds up
+            out[view.name] = count
+        self._visible_memo[supersample] = (h.copy(), {name: n.copy() for name, n in out.items()})
         return out
 
     def as_view(self, mesh: ViewMesh) -> Any:
