@@ -24,7 +24,12 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from saucerfab.fabricate.options import NEUTRAL_WALL_RGB, SEAT_KINDS, FabOptions
+from saucerfab.fabricate.options import (
+    BLEED_COMPENSATIONS,
+    NEUTRAL_WALL_RGB,
+    SEAT_KINDS,
+    FabOptions,
+)
 from saucerfab.files.formats import FORMATS, WRITERS, labels
 from saucerfab.model.profiles import DEFAULT_PRINTER
 
@@ -100,6 +105,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         f"stand out beside it; {','.join(map(str, NEUTRAL_WALL_RGB))} for a design without one)")
     c.add_argument("--no-inpaint", dest="inpaint", action="store_const", const="none",
                    help="leave unseen areas in the wall colour instead of continuing their neighbours' colours")
+    c.add_argument("--bleed-compensation", dest="bleed_compensation", choices=BLEED_COMPENSATIONS,
+                   help="pre-sharpen the texture for the printer's colour bleed (its profile's colour_bleed_mm), so "
+                        f"the print's colours blur into the design's (default {_default('bleed_compensation')})")
     c.add_argument("--zip-obj", dest="obj_zip", action="store_const", const=True,
                    help="write OBJ + MTL + PNG as one zip (what bureaus ask for)")
     c.add_argument("--name", dest="name", help=f"file stem of the written files (default {_default('name')})")

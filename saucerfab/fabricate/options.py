@@ -17,6 +17,8 @@ from saucerfab.errors import ConfigError
 
 SeatKind = Literal["recess", "ring", "none"]
 SEAT_KINDS: tuple[str, ...] = ("recess", "ring", "none")
+BleedCompensation = Literal["on", "off"]
+BLEED_COMPENSATIONS: tuple[str, ...] = ("on", "off")
 
 #: texture atlas edges we accept (a power of two keeps mipmaps exact)
 MIN_TEXTURE_PX, MAX_TEXTURE_PX = 64, 16384
@@ -75,6 +77,11 @@ class FabOptions:
         inpaint: ``harmonic`` fills faces no viewer sees (``FaceView.NEITHER``)
             with a smooth (harmonic) continuation of their neighbours'
             colours; ``none`` leaves them at ``wall_rgb``.
+        bleed_compensation: ``on`` pre-sharpens the top's texture for the printer's colour bleed
+            (its profile's ``colour_bleed_mm``; :func:`saucerfab.fabricate.bleed.compensate_top`),
+            so that the print's blurred colours come closer to the design's; the per-vertex colours
+            (PLY) stay the design's. ``off`` (the default): the texture as designed. Recorded in
+            ``export.json`` with the width used (``bleed``) only when on.
         obj_zip: write OBJ + MTL + PNG as one ``.zip`` (what bureaus ask for)
             instead of three loose files.
         name: file stem of the written files (``saucer.3mf`` ...).
@@ -95,6 +102,7 @@ class FabOptions:
     wall_rgb: tuple[int, int, int] | None = None
     mirror_rgb: tuple[int, int, int] | None = None
     inpaint: Literal["harmonic", "none"] = "harmonic"
+    bleed_compensation: BleedCompensation = "off"
     obj_zip: bool = False
     name: str = "saucer"
     coord_decimals: int = 5
@@ -132,6 +140,11 @@ class FabOptions:
                 object.__setattr__(self, key, rgb)
         if self.inpaint not in ("harmonic", "none"):
             raise ConfigError(f"inpaint must be 'harmonic' or 'none', got {self.inpaint!r}")
+        if self.bleed_compensation not in BLEED_COMPENSATIONS:
+            raise ConfigError(
+                f"bleed_compensation must be {' or '.join(map(repr, BLEED_COMPENSATIONS))}, "
+                f"got {self.bleed_compensation!r}"
+            )
         if (
             not isinstance(self.name, str)
             or not self.name
@@ -164,11 +177,15 @@ class FabOptions:
 
         Without a rim (``saucer_rim_mm`` 0) the rim's two settings are left
         out: they shape nothing, and a part without a rim is recorded
-        (``export.json``) exactly as before the rim existed.
+        (``export.json``) exactly as before the rim existed. So is
+        ``bleed_compensation`` when off: an export without it is the one made
+        before the option existed, byte for byte.
         """
         d = asdict(self)
         if not self.saucer_rim_mm:
             del d["saucer_rim_mm"], d["saucer_rim_height_mm"]
+        if self.bleed_compensation == "off":
+            del d["bleed_compensation"]
         for key in ("wall_rgb", "mirror_rgb"):
             d[key] = None if getattr(self, key) is None else list(getattr(self, key))
         return d

@@ -367,6 +367,22 @@ def export_design(
 
     page, bake_stats = bake_page(dsg, layout, wall_rgb=opts.wall_rgb, inpaint=opts.inpaint)
     vrgb = vertex_colors(solid, uvmap, page, layout, opts.wall_rgb)
+    bleed: dict[str, float] | None = None
+    if opts.bleed_compensation == "on":  # after the vertex colours: they keep the design's (a cell, not a texel)
+        from saucerfab.fabricate.bleed import compensate_top, sigma_px, top_px_per_mm
+
+        t_bleed = time.perf_counter()
+        density = top_px_per_mm(layout, solid.grid_x, solid.grid_y, solid.heights)
+        bleed = {"sigma_mm": profile.colour_bleed_mm, "px_per_mm": round(density, 6),
+                 "sigma_px": round(sigma_px(density, profile.colour_bleed_mm), 6)}
+        if profile.colour_bleed_mm > 0:
+            page = compensate_top(page, layout, density, profile.colour_bleed_mm)
+        else:
+            format_warnings.append(
+                f"bleed compensation asked for, but {profile.name}'s profile states no colour_bleed_mm: "
+                "nothing was compensated (add colour_bleed_mm to the profile)"
+            )
+        timings["bleed"] = time.perf_counter() - t_bleed
     if opts.mirror_rgb != opts.wall_rgb:  # what the cup shows of the plate: the reflected picture's background
         weight = balance(solid, scene)  # the two surrounds' sizes, once for the page and the vertices
         paint_sides(page, solid, uvmap, scene, opts.mirror_rgb, weight)
@@ -374,7 +390,7 @@ def export_design(
     t = step("bake", t)
     # split the step for the benchmark's table: top bake, unseen-area fill, the rest (page, vertex colours)
     timings["inpaint"] = bake_stats["inpaint_s"]
-    timings["page"] = timings["bake"] - bake_stats["bake_s"] - bake_stats["inpaint_s"]
+    timings["page"] = timings["bake"] - bake_stats["bake_s"] - bake_stats["inpaint_s"] - timings.get("bleed", 0.0)
     timings["bake"] = bake_stats["bake_s"]
     # the atlas and the reference pictures that travel with the print, encoded side by side
     refs = {reference_name(v): img for v, img in sorted(dsg.references.items())}
@@ -430,6 +446,7 @@ def export_design(
         "unseen_fraction": round(bake_stats["unseen_fraction"], 6),
         "seat": {"kind": solid.seat.kind, "floor_z_mm": round(solid.seat.floor_z, 6)},
         "options": opts.to_dict(),
+        **({} if bleed is None else {"bleed": bleed}),  # only with the compensation on: off writes what it always did
         "warnings": [*format_warnings, *solid.warnings],
         "files": {
             name: {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}

@@ -29,6 +29,9 @@ DEFAULT_PRINTER = "j55"
 THIN_POLICIES = ("warn", "refuse")
 #: largest profile file read (a real one is a few hundred bytes)
 MAX_PROFILE_BYTES = 100_000
+#: the widest colour bleed a profile may state, mm: a printer blurring its colours over millimetres would
+#: print no picture, and a width in micrometres typed as millimetres (120 for 0.12) is caught
+MAX_COLOUR_BLEED_MM = 2.0
 
 
 @dataclass(frozen=True)
@@ -53,6 +56,10 @@ class PrinterProfile:
             (walls under min_wall_mm over more than
             ``Limits.thin_wall_error_fraction`` of the surface are not
             printable on any profile).
+        colour_bleed_mm: the lateral colour bleed: the standard deviation, mm, of the
+            Gaussian point spread that blurs the printed colour along the surface (light
+            scattering in translucent resin; :mod:`saucerfab.fabricate.bleed`); 0 (the
+            default for a profile that states none): no bleed known, nothing compensated.
         notes: free text.
     """
 
@@ -68,6 +75,7 @@ class PrinterProfile:
     max_triangles: int = 0
     max_file_mb: float = 0.0
     thin_policy: str = "warn"
+    colour_bleed_mm: float = 0.0
     notes: str = ""
 
     def fits(self, bbox_mm: tuple[float, float, float]) -> bool:
@@ -96,7 +104,9 @@ def _default_dirs() -> list[Path]:
 
 
 #: keys a profile may leave out (PrinterProfile's defaults apply), and how each is read
-_OPTIONAL: dict[str, Callable[[Any], Any]] = {"max_triangles": int, "max_file_mb": float, "thin_policy": str, "notes": str}
+_OPTIONAL: dict[str, Callable[[Any], Any]] = {
+    "max_triangles": int, "max_file_mb": float, "thin_policy": str, "colour_bleed_mm": float, "notes": str,
+}
 
 
 def _size(v: float) -> bool:
@@ -150,6 +160,10 @@ def _parse(path: Path) -> PrinterProfile:
             (f"max_triangles must be 0 (no limit) or positive, got {prof.max_triangles!r}", prof.max_triangles >= 0),
             (f"max_file_mb must be 0 (no limit) or finite and positive, got {prof.max_file_mb!r}",
              prof.max_file_mb == 0 or _size(prof.max_file_mb)),
+            (f"colour_bleed_mm must be 0 (none known) or a finite size up to {MAX_COLOUR_BLEED_MM:g} mm "
+             f"(the point spread's standard deviation, e.g. 0.12), got {prof.colour_bleed_mm!r}",
+             prof.colour_bleed_mm == 0
+             or (_size(prof.colour_bleed_mm) and prof.colour_bleed_mm <= MAX_COLOUR_BLEED_MM)),
         ) if not ok
     ]
     if broken:
