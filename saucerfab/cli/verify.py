@@ -1,6 +1,7 @@
 """``saucerfab verify PRINT_DIR``: ray-trace the exported files and score them against the inputs.
 
     saucerfab verify PRINT_DIR [--eyes design|both|box:W,H[,N]] [--res N] [--min-psnr DB] [--json]
+                               [--light emitted|room|lamp:X,Y,Z,SIZE[,POWER]] [--cup-metal NAME]
 
 Writes the pictures (ray-traced view, reference, difference heat map) and
 ``verify.json`` into ``PRINT_DIR/verify/``, the print folder's own (an
@@ -10,7 +11,10 @@ command that writes). Exit code: 0 every view passed, 1 some view
 is under ``--min-psnr`` or ``--min-coverage``, or a whole view's stray share
 is over ``--max-stray``, 2 the folder or its files cannot be read (nothing
 is written then). Without ``--eyes``, the eyes the design was made for
-(else the design eye and a viewer's two).
+(else the design eye and a viewer's two). ``--light room`` (or a lamp) also
+renders the print under that light, the saucer a plastic and the cup a
+metal (``--cup-metal``), and prints one more line per view: its lit PSNR
+and the strength of its shading pattern beside a flat plate's.
 """
 
 from __future__ import annotations
@@ -51,6 +55,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"highest stray share of the whole view from every eye: the share of the saucer seen outside "
                         f"a frame (directly, or in the mirror) farther than {STRAY_DISTANCE:g} from the background "
                         f"(default {DEFAULT_MAX_STRAY:g}, lenient; the aim is {TARGET_MAX_STRAY:g})")
+    from saucerfab.verify.lighting import CUP_METALS, DEFAULT_LIGHT, DEFAULT_LIT_EYES, DEFAULT_LIT_METAL, LIGHT_FORMS, LIT_EYES
+
+    p.add_argument("--light", default=DEFAULT_LIGHT, metavar="LIGHT",
+                   help=f"what lights the print: {LIGHT_FORMS}. emitted (the default): the texture as emitted light in a "
+                        "perfect mirror, as always; room: a dim room and a soft lamp above and in front; a real light "
+                        "adds the lit renders and scores (the saucer a semi-glossy plastic, the cup a metal)")
+    p.add_argument("--cup-metal", default=None, metavar="NAME",
+                   help=f"the cup's metal under a real --light: {', '.join(CUP_METALS)} (default {DEFAULT_LIT_METAL}; "
+                        "with --light emitted only mirror)")
+    p.add_argument("--lit-eyes", default=None, metavar="WHICH",
+                   help=f"under a real --light, the eyes whose views are rendered lit: {' or '.join(LIT_EYES)} "
+                        f"(default {DEFAULT_LIT_EYES}; each eye adds about the emitted verify's time for that eye)")
     p.add_argument("--primary-only", action="store_true",
                    help="render only the first of OBJ, 3MF, GLB (the others are rendered from the design eye by default)")
     p.add_argument("-o", "--out", metavar="DIR", help="where to write the pictures and verify.json (default PRINT_DIR/verify)")
@@ -101,6 +117,26 @@ def print_scores(result, out=None) -> None:  # type: ignore[no-untyped-def]
           f"stray at most {result.max_stray * 100:g}%; exit {result.exit_code})", file=out)
 
 
+def print_lit_scores(result, out=None) -> None:  # type: ignore[no-untyped-def]
+    """One line per view under a real light (``--light``): lit PSNR and shading pattern; nothing in emitted light."""
+    if result.light is None:
+        return
+    out = out if out is not None else sys.stdout
+    lamp = result.light.get("lamp")
+    where = "" if lamp is None else f", lamp {lamp['size_mm']:g} mm at {','.join(f'{c:g}' for c in lamp['xyz_mm'])} mm"
+    print(f"  under the {result.light['kind']} light (the cup {result.light['cup_metal']['name']}{where}; "
+          f"{result.lit_seconds:.0f} s): against the picture under the light's smooth part; shading pattern of "
+          "the relief (flat plate)", file=out)
+
+    def db(x: float) -> str:
+        return "  -- " if x != x else f"{x:5.1f}"
+
+    for v in result.lit_views:
+        print(f"    {v.view:10s} {v.eye:8s} {db(v.lit_psnr_db)} dB lit  pattern {db(v.shading_pattern_db)} dB "
+              f"(flat plate {db(v.flat_pattern_db)} dB), shading {v.shading_p5:.2f}-{v.shading_p95:.2f}x "
+              f"(flat {v.flat_p5:.2f}-{v.flat_p95:.2f}x), a white print reads {v.white_level:.2f}", file=out)
+
+
 def run(args: argparse.Namespace) -> int:
     import json
 
@@ -122,6 +158,11 @@ def run(args: argparse.Namespace) -> int:
                           "--eyes both, or drop it")
     ipd = DEFAULT_IPD_MM if args.ipd_mm is None else args.ipd_mm
     eyes = parse_eyes(args.eyes, ipd) if args.eyes is not None else None
+    from saucerfab.verify.lighting import cup_metal, lit_eyes, parse_light
+
+    light = parse_light(args.light)
+    cup_metal(args.cup_metal, light)  # a metal in emitted light is refused before anything is rendered
+    lit_eyes(args.lit_eyes, light)
     folder = Path(args.folder)
     out = Path(args.out) if args.out else folder / "verify"
 
@@ -141,6 +182,7 @@ def run(args: argparse.Namespace) -> int:
         result = verify_print(
             folder, eyes=eyes, res=args.res, spp=args.spp, min_psnr_db=args.min_psnr,
             min_coverage=args.min_coverage, max_stray=args.max_stray, pictures_dir=tmp, all_formats=not args.primary_only, progress=progress,
+            light=light, metal=args.cup_metal, lit_eye_choice=args.lit_eyes,
         )
         doc = result.to_dict()
         (tmp / "verify.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
@@ -152,5 +194,6 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(doc, indent=2))
     else:
         print_scores(result)
+        print_lit_scores(result)
         print(f"  pictures and verify.json in {out}")
     return result.exit_code

@@ -31,6 +31,12 @@ each eye (:mod:`.eyes`):
    picture in its frame, its background around it), with the stray share of
    each surround and the reflected picture's share of the cup's width.
 
+6. under a real light (``--light room`` or ``lamp:...``, :mod:`.lighting`), the primary
+   file's views from the design eye (or every eye: ``lit_eye_choice``) are also rendered with the saucer a plastic and the cup a
+   metal, and scored against the reference under the light's smooth part, with the
+   strength of the relief's own shading pattern beside a flat plate's (:mod:`.litscore`).
+   These scores are reported, not passed or failed.
+
 A view passes when its PSNR is at least ``min_psnr_db`` and its coverage at
 least ``min_coverage``; a whole view when both its stray shares are at most
 ``max_stray``; the folder passes when every view and whole view of every eye does.
@@ -42,7 +48,7 @@ import math
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -51,6 +57,7 @@ from saucerfab.fabricate.scene_file import PrintScene
 from saucerfab.imaging.images import recorded_background
 from saucerfab.model.design import Intent
 from saucerfab.model.eyes import EyeSpec, eye_positions
+from saucerfab.verify.lighting import LightSpec, cup_metal, lit_eyes, parse_light
 from saucerfab.verify.metrics import best_shift, psnr, ssim
 from saucerfab.verify.printfolder import (
     VerifyInputError,
@@ -66,11 +73,15 @@ from saucerfab.verify.results import (
     REFERENCE_FLAT_PRINT,
     REFERENCE_PICTURE,
     FileScore,
+    LitViewScore,
     VerifyResult,
     ViewScore,
     WholeViewScore,
 )
 from saucerfab.verify.wholeview import DEFAULT_MAX_STRAY
+
+if TYPE_CHECKING:
+    from saucerfab.verify.litscore import LitViews
 
 #: default pass level per view, dB: a picture at 20 dB is plainly recognisable
 #: with visible flaws; graphic designs print at 30 dB and more from the design eye
@@ -172,6 +183,10 @@ def verify_print(
     pictures_dir: str | Path | None = None,
     all_formats: bool = True,
     progress: Progress | None = None,
+    light: LightSpec | None = None,
+    metal: str | None = None,
+    lit_eye_choice: str | None = None,
+    lit_seed: int = 0,
 ) -> VerifyResult:
     """Render the print folder's files and score each view from each eye.
 
@@ -187,6 +202,15 @@ def verify_print(
             each written atomically); None writes none.
         all_formats: also render the other textured files from the design eye.
         progress: called with (message, fraction done).
+        light: what lights the print (:mod:`.lighting`; default: the emitted texture, as
+            before). A real light adds each view of the primary file from each eye rendered
+            and scored under it (:mod:`.litscore`): ``lit_views`` and ``light`` of the result.
+        metal: the cup's metal under that light (:data:`~.lighting.CUP_METALS`; default
+            :data:`~.lighting.DEFAULT_LIT_METAL`); refused in emitted light but ``mirror``.
+        lit_eye_choice: under a real light, the eyes whose views are rendered lit: ``design`` (the
+            default) or ``all`` (:data:`~.lighting.LIT_EYES`).
+        lit_seed: the lit renders' seed (another seed renders them with other samples: the lit
+            scores' own noise, as the benchmark measures it).
 
     Returns:
         A :class:`VerifyResult`; its ``exit_code`` is 0 when every view passed.
@@ -201,6 +225,9 @@ def verify_print(
 
     t_start = time.perf_counter()
     _check_levels(res, spp, min_psnr_db, min_coverage, max_stray)
+    light = light if light is not None else parse_light(None)
+    cup = cup_metal(metal, light)
+    lit_all = lit_eyes(lit_eye_choice, light) == "all"
     folder = Path(folder)
     if not folder.is_dir():
         raise VerifyInputError(f"{folder} is not a folder; give the folder 'saucerfab export --out' wrote")
@@ -222,7 +249,8 @@ def verify_print(
     made = design_parameters(folder)  # export.json's record of the design: its eyes and its background
     spec = eyes or Intent.of(made).eyes or EyeSpec()
     all_eyes = eye_positions(spec, scene.camera, scene.views["direct"].target)
-    jobs = len(all_eyes) * (len(views) + 1) + (len(files) - 1) * len(views)
+    lit_jobs = (len(all_eyes) if lit_all else 1) * len(views) if light.lit else 0
+    jobs = len(all_eyes) * (len(views) + 1) + (len(files) - 1) * len(views) + lit_jobs
     done = 0
 
     def step(msg: str) -> None:
@@ -237,6 +265,8 @@ def verify_print(
         pictures.mkdir(parents=True, exist_ok=True)
     scores: list[FileScore] = []
     wholes: list[WholeViewScore] = []
+    lit_scores: list[LitViewScore] = []
+    lit: LitViews | None = None
     renders: dict[tuple[str, str], np.ndarray] = {}
     max_shift = round(MAX_SHIFT_FRACTION * res)
     picture_masks = {v: scene.views[v].picture_mask(res) for v in views}  # each picture's rectangle in its frame
@@ -255,6 +285,10 @@ def verify_print(
         if k == 0:
             whole = WholeViews(tracer, surface, scene, full_refs,
                                background_colours(full_refs, recorded_background(made)), res)
+            if light.lit:
+                from saucerfab.verify.litscore import LitViews
+
+                lit = LitViews(surface, scene, light, cup, res, spp, seed=lit_seed)
         design_regions: dict[str, np.ndarray] = {}
         for eye in all_eyes if k == 0 else all_eyes[:1]:
             for view in views:
@@ -297,6 +331,12 @@ def verify_print(
                     renders[(eye.name, view + ":reference")] = ref1
                 fs.views.append(score)
                 step(f"{path.name}: {view} view from the {eye.name} eye {score.psnr_db:.1f} dB")
+                if k == 0 and lit is not None and (lit_all or eye is all_eyes[0]):
+                    ls = lit.score(eye.name, eye.position, view, scene.views[view], cov >= FULL_COVERAGE, reg1, ref1,
+                                   in_picture, pictures, picture_box(in_picture))
+                    lit_scores.append(ls)
+                    step(f"{path.name}: {view} view from the {eye.name} eye under the {light.kind} light "
+                         f"{ls.lit_psnr_db:.1f} dB, shading pattern {ls.shading_pattern_db:.1f} dB")
             if k == 0:
                 wholes.append(_whole_view(whole, eye.name, eye.position, spp, max_stray, pictures, renders))
                 step(f"{path.name}: the whole view from the {eye.name} eye {wholes[-1].psnr_db:.1f} dB")
@@ -318,6 +358,9 @@ def verify_print(
         renders=renders,
         whole_views=wholes,
         max_stray=float(max_stray),
+        light=lit.record() if lit is not None else None,
+        lit_views=lit_scores,
+        lit_seconds=lit.seconds if lit is not None else float("nan"),
     )
 
 

@@ -1,4 +1,5 @@
-"""What ``saucerfab verify`` found: scores per view, per file, and the whole result (schema ``saucerfab.verify/3``).
+"""What ``saucerfab verify`` found: scores per view, per file, and the whole result (schema ``saucerfab.verify/3``;
+a lit verify adds the optional ``light`` and ``lit_views``).
 
 Plain data with their JSON form; :mod:`.core` makes them, :mod:`.pictures`
 titles its pictures with them and the CLI prints them.
@@ -122,6 +123,59 @@ class WholeViewScore:
 
 
 @dataclass
+class LitViewScore:
+    """One view from one eye under a real light (``verify --light``, :mod:`.litscore`).
+
+    Attributes:
+        view, eye: as :class:`ViewScore`.
+        lit_psnr_db: PSNR of the lit render against the reference lit by the light's smooth part
+            (one best gain per channel), over the emitted score's pixels, dB.
+        gain_rgb: that gain per channel: the plastic's colour against the texture's under the
+            smooth light (about 0.8-1: the coat's Fresnel loss; the smooth part holds the metal).
+        white_level: mean of the white render over the compared pixels (linear, a white paper at the
+            cup's foot reads the light's power + ambient): how bright a white print looks in this view
+            (a reflected view's, through the cup's metal, about half a direct one's).
+        shading_pattern_db: PSNR of 0.5 * white / smooth against 0.5: the relief's own shading on a
+            mid-grey picture, dB (higher: weaker pattern).
+        shading_p5, shading_p95: 5th and 95th percentiles of white / smooth.
+        flat_pattern_db, flat_p5, flat_p95: the same for a flat plate under the same light.
+        pixels: pixels compared.
+        picture: the lit picture's file name, if written.
+    """
+
+    view: str
+    eye: str
+    lit_psnr_db: float
+    gain_rgb: tuple[float, float, float]
+    white_level: float
+    shading_pattern_db: float
+    shading_p5: float
+    shading_p95: float
+    flat_pattern_db: float
+    flat_p5: float
+    flat_p95: float
+    pixels: int
+    picture: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "view": self.view,
+            "eye": self.eye,
+            "lit_psnr_db": _num(self.lit_psnr_db, 2),
+            "gain_rgb": [_num(g, 4) for g in self.gain_rgb],
+            "white_level": _num(self.white_level, 4),
+            "shading_pattern_db": _num(self.shading_pattern_db, 2),
+            "shading_p5": _num(self.shading_p5, 4),
+            "shading_p95": _num(self.shading_p95, 4),
+            "flat_pattern_db": _num(self.flat_pattern_db, 2),
+            "flat_p5": _num(self.flat_p5, 4),
+            "flat_p95": _num(self.flat_p95, 4),
+            "pixels": int(self.pixels),
+            "picture": self.picture,
+        }
+
+
+@dataclass
 class FileScore:
     """The scores of one rendered file."""
 
@@ -153,6 +207,10 @@ class VerifyResult:
             rgb, and (eye, view + ":region") -> (S, S) bool, the pixels compared.
         whole_views: the primary file's whole view from each eye (:mod:`.wholeview`).
         max_stray: the highest stray share a whole view passes with.
+        light: under ``verify --light`` other than ``emitted``: the light, the materials and the
+            scoring (:meth:`~.litscore.LitViews.record`); None for the emitted verify (no key in the JSON).
+        lit_views: the primary file's views under that light, each eye.
+        lit_seconds: wall time of the lit renders and scores.
     """
 
     folder: Path
@@ -170,6 +228,9 @@ class VerifyResult:
     renders: dict[tuple[str, str], np.ndarray] = field(default_factory=dict, repr=False)
     whole_views: list[WholeViewScore] = field(default_factory=list)
     max_stray: float = float("nan")
+    light: dict[str, Any] | None = None
+    lit_views: list[LitViewScore] = field(default_factory=list)
+    lit_seconds: float = float("nan")
 
     @property
     def exit_code(self) -> int:
@@ -204,6 +265,9 @@ class VerifyResult:
             "max_stray": _num(self.max_stray, 4),
             "whole_views": [w.to_dict() for w in self.whole_views],
         }
+        if self.light is not None:  # a lit verify only: the emitted verify's document is as before
+            d["light"] = {**self.light, **({"seconds": round(self.lit_seconds, 2)} if record_times else {})}
+            d["lit_views"] = [v.to_dict() for v in self.lit_views]
         if record_times:
             d["seconds"] = round(self.seconds, 2)
         return d

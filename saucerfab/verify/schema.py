@@ -1,4 +1,9 @@
-"""JSON Schema of ``saucerfab verify --json`` (``saucerfab.verify/3``); ``saucerfab verify --schema`` prints it."""
+"""JSON Schema of ``saucerfab verify --json`` (``saucerfab.verify/3``); ``saucerfab verify --schema`` prints it.
+
+``light`` and ``lit_views`` (issue 45) are optional: a verify under a real light (``--light room`` or
+``lamp:...``) writes them, the emitted verify (the default) does not, so its document is the same as
+before and the version stays ``/3``.
+"""
 
 from __future__ import annotations
 
@@ -55,6 +60,51 @@ WHOLE_VIEW_SCORE: dict[str, Any] = {
     },
 }
 
+_RGB = {"type": "array", "items": {"type": ["number", "null"]}, "minItems": 3, "maxItems": 3}
+
+LIT_VIEW_SCORE: dict[str, Any] = {
+    "type": "object",
+    "required": ["view", "eye", "lit_psnr_db", "gain_rgb", "white_level", "shading_pattern_db", "shading_p5", "shading_p95",
+                 "flat_pattern_db", "flat_p5", "flat_p95", "pixels", "picture"],
+    "properties": {
+        "view": {"enum": ["direct", "reflected", "reflected2"]},
+        "eye": {"type": "string"},
+        "lit_psnr_db": {**_NUM_OR_NULL, "description": "PSNR of the lit render against the reference lit by the light's "
+                                                       "smooth part (one best gain per channel), same pixels as psnr_db"},
+        "gain_rgb": {**_RGB, "description": "that gain per channel: the plastic against the texture (about 0.8-1)"},
+        "white_level": {**_NUM_OR_NULL, "description": "mean of the white render over the compared pixels: how bright "
+                                                       "a white print looks in this view (the cup's metal darkens "
+                                                       "the reflected views)"},
+        "shading_pattern_db": {**_NUM_OR_NULL, "description": "PSNR of 0.5 * white / smooth against 0.5: the relief's "
+                                                              "own shading on a mid-grey picture (99: none above the noise)"},
+        "shading_p5": _NUM_OR_NULL,
+        "shading_p95": {**_NUM_OR_NULL, "description": "5th and 95th percentiles of white / smooth, the noise taken out"},
+        "flat_pattern_db": {**_NUM_OR_NULL, "description": "the same for a flat plate at the top's mean height"},
+        "flat_p5": _NUM_OR_NULL,
+        "flat_p95": _NUM_OR_NULL,
+        "pixels": {"type": "integer", "minimum": 0},
+        "picture": {"type": ["string", "null"], "description": "lit view, reference under the smooth light, "
+                                                                "shading alone, flat plate's shading"},
+    },
+}
+
+LIGHT: dict[str, Any] = {
+    "type": "object",
+    "required": ["kind", "lamp", "ambient", "cup_metal", "plastic", "integrator", "smooth_sigma_px"],
+    "properties": {
+        "kind": {"enum": ["room", "lamp"]},
+        "lamp": {"type": ["object", "null"], "required": ["xyz_mm", "size_mm", "power"],
+                 "description": "a square lamp facing the cup's foot; xyz_mm from the cup's foot: x to the viewer's "
+                                "right, y towards the viewer, z up; power: a white paper at the cup's foot reads it"},
+        "ambient": {"type": "number", "minimum": 0, "description": "the room's uniform radiance (a white paper reads it)"},
+        "cup_metal": {"type": "object", "required": ["name", "n_rgb", "k_rgb", "reflectance_rgb", "source"]},
+        "plastic": {"type": "object", "required": ["bsdf", "alpha", "ior"]},
+        "integrator": {"type": "object", "required": ["type", "max_depth"]},
+        "smooth_sigma_px": {"type": "number", "description": "the smooth part's Gaussian, pixels"},
+        "seconds": {"type": "number"},
+    },
+}
+
 JSON_SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "title": "saucerfab verify report",
@@ -103,6 +153,9 @@ JSON_SCHEMA: dict[str, Any] = {
                 },
             },
         },
+        "light": {**LIGHT, "description": "a verify under a real light (--light room or lamp:...) only"},
+        "lit_views": {"type": "array", "items": LIT_VIEW_SCORE,
+                      "description": "the primary file's views from each eye under that light"},
         "seconds": {"type": "number"},
     },
 }

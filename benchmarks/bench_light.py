@@ -1,0 +1,108 @@
+"""``saucerfab verify --light room`` against the emitted verify on one bundled pair's default export (issue 45).
+
+    .venv/bin/python benchmarks/bench_light.py                          # heart-star, design + export made here
+    .venv/bin/python benchmarks/bench_light.py --print-dir /tmp/lx/p    # an export made before
+    .venv/bin/python benchmarks/bench_light.py --pair chelsea-coffee --metal platinum
+
+The export is the default one a user gets: ``saucerfab design --direct D
+--reflected R --out DESIGN`` (every default) and ``saucerfab export DESIGN
+--out PRINT --no-verify`` (the design's printer, its preferred format). Then
+verify's library call at 256 px, 16 samples per pixel, from the design eye and
+a viewer's two eyes, primary file only, once in emitted light, twice under
+``--light room`` (the lit views from the design eye, the default) with two
+seeds (the second renders the lit views with other samples: ``lit_seed``;
+their difference is the lit scores' noise), and once with ``--lit-eyes
+all`` (every eye lit), and prints per view and eye: the
+emitted PSNR, the lit PSNR of both runs (their difference is the noise of the
+lit score), the gain (the cup's metal shows in the reflected views), the
+shading pattern of the relief and of a flat plate (dB, and 5th-95th
+percentiles of white / smooth), how bright a white print looks there, and
+the wall times (the issue's target: the lit verify within 2x the emitted
+one's on two cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_design import machine
+
+from saucerfab.cli import main as cli
+from saucerfab.samples import DEMO_PAIR, PAIRS, SAMPLES
+from saucerfab.verify import EyeSpec, verify_print
+from saucerfab.verify.lighting import DEFAULT_LIT_METAL, parse_light
+
+
+def make_export(pair: str, tmp: Path) -> tuple[Path, str]:
+    """The pair's default design and export in ``tmp``; (print folder, the commands)."""
+    direct, reflected = PAIRS[pair]
+    design, print_dir = tmp / "design", tmp / "print"
+    t0 = time.perf_counter()
+    if cli(["design", "--direct", str(SAMPLES / direct), "--reflected", str(SAMPLES / reflected),
+            "--out", str(design), "--quiet"]) != 0:
+        raise SystemExit(f"design failed for {pair}")
+    if cli(["export", str(design), "--out", str(print_dir), "--quiet", "--no-verify"]) != 0:
+        raise SystemExit(f"export failed for {pair}")
+    print(f"design + export {time.perf_counter() - t0:.0f} s", flush=True)
+    return print_dir, (f"saucerfab design --direct samples/{direct} --reflected samples/{reflected} --out D && "
+                       "saucerfab export D --out P --no-verify")
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--pair", default=DEMO_PAIR, choices=list(PAIRS))
+    p.add_argument("--print-dir", help="verify this export instead of making the pair's")
+    p.add_argument("--metal", default=DEFAULT_LIT_METAL, help="the cup's metal under the room light")
+    p.add_argument("--res", type=int, default=256)
+    p.add_argument("--spp", type=int, default=16)
+    p.add_argument("--keep", help="write the verify pictures under this folder (emitted/, room/)")
+    args = p.parse_args()
+    print(f"machine: {machine()}", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        if args.print_dir:
+            folder, made = Path(args.print_dir), f"(the export in {args.print_dir})"
+        else:
+            folder, made = make_export(args.pair, Path(tmp))
+        keep = Path(args.keep) if args.keep else None
+        common = {"eyes": EyeSpec("both"), "res": args.res, "spp": args.spp, "all_formats": False}
+        emitted = verify_print(folder, pictures_dir=keep / "emitted" if keep else None, **common)
+        room = parse_light("room")
+        lit = [verify_print(folder, light=room, metal=args.metal, lit_seed=seed,
+                            pictures_dir=keep / f"room{seed}" if keep else None, **common) for seed in (0, 1)]
+        every = verify_print(folder, light=room, metal=args.metal, lit_eye_choice="all",
+                             pictures_dir=keep / "room_all" if keep else None, **common)
+    print()
+    print(f"pair {args.pair}: {made}")
+    print(f"verify P --eyes both --res {args.res} --spp {args.spp} --primary-only "
+          f"[--light room --cup-metal {args.metal} [--lit-eyes all]]")
+    print()
+    print("| view | eye | emitted dB | lit dB (seed 0 / 1) | gain R,G,B | white print reads "
+          "| pattern dB: relief (seed 1) (flat plate) | shading p5-p95: relief (flat plate) |")
+    print("|---|---|---|---|---|---|---|---|")
+    second = {(v.eye, v.view): v for v in lit[1].lit_views}
+    for v0 in every.lit_views:
+        v1 = second.get((v0.eye, v0.view))
+        e = emitted.score(v0.view, v0.eye)
+        lit_db = f"{v0.lit_psnr_db:.1f}" + ("" if v1 is None else f" / {v1.lit_psnr_db:.1f}")
+        pattern = f"{v0.shading_pattern_db:.1f}" + ("" if v1 is None else f" ({v1.shading_pattern_db:.1f})")
+        print(f"| {v0.view} | {v0.eye} | {e.psnr_db:.1f} | {lit_db} | {', '.join(f'{g:.2f}' for g in v0.gain_rgb)} "
+              f"| {v0.white_level:.3f} | {pattern} ({v0.flat_pattern_db:.1f}) "
+              f"| {v0.shading_p5:.2f}-{v0.shading_p95:.2f} ({v0.flat_p5:.2f}-{v0.flat_p95:.2f}) |")
+    print()
+    print(f"wall time: emitted {emitted.seconds:.1f} s; --light room (design eye lit) {lit[0].seconds:.1f} s and "
+          f"{lit[1].seconds:.1f} s (of which lit {lit[0].lit_seconds:.1f} s and {lit[1].lit_seconds:.1f} s): "
+          f"{lit[0].seconds / emitted.seconds:.2f}x and {lit[1].seconds / emitted.seconds:.2f}x the emitted verify; "
+          f"--lit-eyes all {every.seconds:.1f} s (lit {every.lit_seconds:.1f} s): {every.seconds / emitted.seconds:.2f}x")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
