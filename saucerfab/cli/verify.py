@@ -1,7 +1,7 @@
 """``saucerfab verify PRINT_DIR``: ray-trace the exported files and score them against the inputs.
 
     saucerfab verify PRINT_DIR [--eyes design|both|box:W,H[,N]] [--res N] [--min-psnr DB] [--json]
-                               [--light emitted|room|lamp:X,Y,Z,SIZE[,POWER]] [--cup-metal NAME]
+                               [--light emitted|room|lamp:X,Y,Z,SIZE[,POWER]] [--cup-metal NAME] [--bleed [MM]]
 
 Writes the pictures (ray-traced view, reference, difference heat map) and
 ``verify.json`` into ``PRINT_DIR/verify/``, the print folder's own (an
@@ -55,6 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"highest stray share of the whole view from every eye: the share of the saucer seen outside "
                         f"a frame (directly, or in the mirror) farther than {STRAY_DISTANCE:g} from the background "
                         f"(default {DEFAULT_MAX_STRAY:g}, lenient; the aim is {TARGET_MAX_STRAY:g})")
+    from saucerfab.verify.bleed import BLEED_OF_PRINTER
     from saucerfab.verify.lighting import CUP_METALS, DEFAULT_LIGHT, DEFAULT_LIT_EYES, DEFAULT_LIT_METAL, LIGHT_FORMS, LIT_EYES
 
     p.add_argument("--light", default=DEFAULT_LIGHT, metavar="LIGHT",
@@ -67,6 +68,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lit-eyes", default=None, metavar="WHICH",
                    help=f"under a real --light, the eyes whose views are rendered lit: {' or '.join(LIT_EYES)} "
                         f"(default {DEFAULT_LIT_EYES}; each eye adds about the emitted verify's time for that eye)")
+    p.add_argument("--bleed", nargs="?", const=BLEED_OF_PRINTER, default=None, metavar="MM",
+                   help="render the print with its colours blurred as the printer prints them: the colour bleed of "
+                        "the printer the folder was exported for (its profile's colour_bleed_mm), or MM given; "
+                        "shows what an export's --bleed-compensation brings back. Default: the colours as written")
     p.add_argument("--primary-only", action="store_true",
                    help="render only the first of OBJ, 3MF, GLB (the others are rendered from the design eye by default)")
     p.add_argument("-o", "--out", metavar="DIR", help="where to write the pictures and verify.json (default PRINT_DIR/verify)")
@@ -158,6 +163,7 @@ def run(args: argparse.Namespace) -> int:
                           "--eyes both, or drop it")
     ipd = DEFAULT_IPD_MM if args.ipd_mm is None else args.ipd_mm
     eyes = parse_eyes(args.eyes, ipd) if args.eyes is not None else None
+    from saucerfab.verify.bleed import bleed_width_mm
     from saucerfab.verify.lighting import cup_metal, lit_eyes, parse_light
 
     light = parse_light(args.light)
@@ -165,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
     lit_eyes(args.lit_eyes, light)
     folder = Path(args.folder)
     out = Path(args.out) if args.out else folder / "verify"
+    bleed_mm = bleed_width_mm(folder, args.bleed)
 
     def progress(msg: str, fraction: float) -> None:
         if not args.quiet:
@@ -182,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
         result = verify_print(
             folder, eyes=eyes, res=args.res, spp=args.spp, min_psnr_db=args.min_psnr,
             min_coverage=args.min_coverage, max_stray=args.max_stray, pictures_dir=tmp, all_formats=not args.primary_only, progress=progress,
-            light=light, metal=args.cup_metal, lit_eye_choice=args.lit_eyes,
+            light=light, metal=args.cup_metal, lit_eye_choice=args.lit_eyes, bleed_mm=bleed_mm,
         )
         doc = result.to_dict()
         (tmp / "verify.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")

@@ -187,6 +187,7 @@ def verify_print(
     metal: str | None = None,
     lit_eye_choice: str | None = None,
     lit_seed: int = 0,
+    bleed_mm: float | None = None,
 ) -> VerifyResult:
     """Render the print folder's files and score each view from each eye.
 
@@ -209,6 +210,8 @@ def verify_print(
             :data:`~.lighting.DEFAULT_LIT_METAL`); refused in emitted light but ``mirror``.
         lit_eye_choice: under a real light, the eyes whose views are rendered lit: ``design`` (the
             default) or ``all`` (:data:`~.lighting.LIT_EYES`).
+        bleed_mm: blur every file's textures as a printer with this colour bleed prints them
+            (:mod:`.bleed`) before any render; None: the files' colours as written.
         lit_seed: the lit renders' seed (another seed renders them with other samples: the lit
             scores' own noise, as the benchmark measures it).
 
@@ -279,6 +282,10 @@ def verify_print(
     limits = folder_limits(folder)  # the export's own sizes, within what saucerfab exports
     for k, (fmt, path) in enumerate(files):
         surface = read_surface(path, fmt, scene, limits)
+        if bleed_mm is not None:
+            from saucerfab.verify.bleed import bleed_surface
+
+            surface = bleed_surface(surface, bleed_mm)
         tracer = PrintTracer(surface, scene.cup)
         fs = FileScore(path, fmt)
         flats: FlatPrints | None = None
@@ -361,6 +368,7 @@ def verify_print(
         light=lit.record() if lit is not None else None,
         lit_views=lit_scores,
         lit_seconds=lit.seconds if lit is not None else float("nan"),
+        bleed_mm=bleed_mm,
     )
 
 

@@ -231,6 +231,7 @@ class VerifyResult:
     light: dict[str, Any] | None = None
     lit_views: list[LitViewScore] = field(default_factory=list)
     lit_seconds: float = float("nan")
+    bleed_mm: float | None = None
 
     @property
     def exit_code(self) -> int:
@@ -265,6 +266,8 @@ class VerifyResult:
             "max_stray": _num(self.max_stray, 4),
             "whole_views": [w.to_dict() for w in self.whole_views],
         }
+        if self.bleed_mm is not None:  # under --bleed only: a verify without it writes what it always did
+            d["bleed_mm"] = self.bleed_mm
         if self.light is not None:  # a lit verify only: the emitted verify's document is as before
             d["light"] = {**self.light, **({"seconds": round(self.lit_seconds, 2)} if record_times else {})}
             d["lit_views"] = [v.to_dict() for v in self.lit_views]

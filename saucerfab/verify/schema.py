@@ -153,6 +153,9 @@ JSON_SCHEMA: dict[str, Any] = {
                 },
             },
         },
+        "bleed_mm": {"type": "number", "exclusiveMinimum": 0,
+                     "description": "under --bleed only: the colour bleed the textures were blurred by, mm "
+                                    "(the point spread's standard deviation)"},
         "light": {**LIGHT, "description": "a verify under a real light (--light room or lamp:...) only"},
         "lit_views": {"type": "array", "items": LIT_VIEW_SCORE,
                       "description": "the primary file's views from each eye under that light"},
