@@ -201,6 +201,9 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(doc, indent=2))
     else:
         print_scores(result)
+        if result.bleed_mm is not None:
+            print(f"  the colours blurred as printed: a bleed of {result.bleed_mm:g} mm"
+                  + ("" if args.bleed is not None else " (the texture was compensated for the printer's bleed)"))
         print_lit_scores(result)
         print(f"  pictures and verify.json in {out}")
     return result.exit_code

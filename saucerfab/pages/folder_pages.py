@@ -311,6 +311,8 @@ def verify_section(folder: Path, *, note: str = "") -> Section | None:
             if data:
                 images.append((f"the whole view from the {w.get('eye')} eye: render | ideal | stray (red on the "
                                "saucer, cyan in the mirror)", data))
+    lit_text, lit_images = _lit_part(folder, ver)
+    images.extend(lit_images)
     r = ver.get("renderer", {})
     whole = ""
     if whole_rows:
@@ -331,11 +333,42 @@ def verify_section(folder: Path, *, note: str = "") -> Section | None:
         "what the print adds (the relief's parallax) is; the last column is the older score against the input "
         "itself after the best whole-picture shift, which even a flat print fails. Pass level "
         f"{ver.get('min_psnr_db')} dB and {100 * float(ver.get('min_coverage', 0)):.0f} % coverage per view: "
-        + ("every view passes." if ver.get("passed") else "some views are under it.") + whole,
+        + ("every view passes." if ver.get("passed") else "some views are under it.") + whole + lit_text,
         images=images,
         grid=(["file", "view", "eye", "compared with", "PSNR dB", "SSIM", "coverage", "vs input, shifted dB (px)", ""],
               rows),
     )
+
+
+def _lit_part(folder: Path, ver: Mapping[str, Any]) -> tuple[str, list[tuple[str, bytes]]]:
+    """What ``verify --bleed`` and ``--light`` add to the section: a sentence, and the lit pictures."""
+    text, images = "", []
+    bleed = ver.get("bleed_mm")
+    if isinstance(bleed, (int, float)) and not isinstance(bleed, bool):
+        text += f" The colours were blurred as the printer prints them (a colour bleed of {bleed:g} mm)."
+    light = ver.get("light")
+    if not isinstance(light, Mapping):
+        return text, images
+    metal = light.get("cup_metal")
+    metal_name = metal.get("name") if isinstance(metal, Mapping) else "?"
+    lines = []
+    for v in ver.get("lit_views") or []:
+        if not isinstance(v, Mapping):
+            continue
+        label = (f"{v.get('view')} view, {v.get('eye')} eye: {_db(v.get('lit_psnr_db'))} dB under the light, "
+                 f"shading pattern {_db(v.get('shading_pattern_db'))} dB (a flat plate "
+                 f"{_db(v.get('flat_pattern_db'))} dB)")
+        lines.append(label)
+        name = v.get("picture")
+        if isinstance(name, str) and "/" not in name and "\\" not in name:
+            data = _read(folder / "verify" / name, _MAX_PICTURE_BYTES)
+            if data:
+                images.append((f"under the {light.get('kind')} light, the cup {metal_name}: {label}", data))
+    if lines:
+        text += (f" Under the {light.get('kind')} light (the saucer a semi-glossy plastic, the cup {metal_name}; "
+                 "each view against its picture under the light's smooth part, and the relief's own shading "
+                 "pattern beside a flat plate's; higher is weaker): " + "; ".join(lines) + ".")
+    return text, images
 
 
 def _db(v: object) -> str:

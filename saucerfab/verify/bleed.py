@@ -9,7 +9,10 @@ so the scores say what the print looks like, and whether an export's
 ``--bleed-compensation`` brought it back.
 
 The width is the printer's (``--bleed`` alone: the profile ``export.json``
-names) or one given in millimetres (``--bleed 0.2``).
+names) or one given in millimetres (``--bleed 0.2``). A print exported with
+``--bleed-compensation on`` is verified blurred by its printer's bleed
+without being asked (:func:`compensated_width`): its pre-sharpened texture is only
+right as it prints, and read as written it would score its halos.
 """
 
 from __future__ import annotations
@@ -28,16 +31,38 @@ from saucerfab.verify.printfolder import MAX_SCENE_JSON_BYTES, PrintedSurface
 BLEED_OF_PRINTER = "printer"
 
 
-def export_printer(folder: Path) -> str | None:
-    """The printer key ``export.json`` names, or None when it is missing or unreadable."""
+def _export_record(folder: Path) -> dict:
+    """``export.json`` of a print folder (bounded), or {} when it is missing or unreadable."""
     try:
         path = folder / "export.json"
         if path.stat().st_size > MAX_SCENE_JSON_BYTES:
-            return None
-        key = json.loads(path.read_bytes().decode("utf-8"))["printer"]["key"]
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError, KeyError, TypeError):
-        return None
+            return {}
+        doc = json.loads(path.read_bytes().decode("utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        return {}
+    return doc if isinstance(doc, dict) else {}
+
+
+def export_printer(folder: Path) -> str | None:
+    """The printer key ``export.json`` names, or None when it is missing or unreadable."""
+    printer = _export_record(folder).get("printer")
+    key = printer.get("key") if isinstance(printer, dict) else None
     return key if isinstance(key, str) else None
+
+
+def compensated_width(folder: Path) -> float | None:
+    """The bleed, mm, the folder's texture was pre-sharpened for (``export --bleed-compensation on`` records
+    it in ``export.json``), or None: not compensated, or nothing was (a printer with no width)."""
+    from saucerfab.model.profiles import MAX_COLOUR_BLEED_MM
+
+    record = _export_record(folder)
+    options, bleed = record.get("options"), record.get("bleed")
+    if not (isinstance(options, dict) and options.get("bleed_compensation") == "on" and isinstance(bleed, dict)):
+        return None
+    width = bleed.get("sigma_mm")
+    if isinstance(width, bool) or not isinstance(width, (int, float)):
+        return None
+    return float(width) if math.isfinite(width) and 0 < width <= MAX_COLOUR_BLEED_MM else None
 
 
 def bleed_width_mm(folder: Path, value: str | None) -> float | None:

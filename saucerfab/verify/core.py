@@ -211,7 +211,8 @@ def verify_print(
         lit_eye_choice: under a real light, the eyes whose views are rendered lit: ``design`` (the
             default) or ``all`` (:data:`~.lighting.LIT_EYES`).
         bleed_mm: blur every file's textures as a printer with this colour bleed prints them
-            (:mod:`.bleed`) before any render; None: the files' colours as written.
+            (:mod:`.bleed`) before any render; None: the files' colours as written, but for a
+            print exported with its bleed compensated, which is blurred by its printer's.
         lit_seed: the lit renders' seed (another seed renders them with other samples: the lit
             scores' own noise, as the benchmark measures it).
 
@@ -234,6 +235,10 @@ def verify_print(
     folder = Path(folder)
     if not folder.is_dir():
         raise VerifyInputError(f"{folder} is not a folder; give the folder 'saucerfab export --out' wrote")
+    if bleed_mm is None:  # a texture pre-sharpened for the bleed is only right as it prints
+        from saucerfab.verify.bleed import compensated_width
+
+        bleed_mm = compensated_width(folder)
     scene = load_print_scene(folder)
     views = list(scene.views)
     full_refs = load_references(folder, views)

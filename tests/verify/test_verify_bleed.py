@@ -78,3 +78,27 @@ def test_cli_bleed_renders_the_print_blurred_and_records_the_width(a_print: Path
     assert psnr["blurred"]["direct"] < psnr["plain"]["direct"] - 1.0  # a 2 mm bleed costs the picture
     assert main(["verify", str(work), "--bleed", "x", "-o", str(tmp_path / "c")]) == 2
     assert "--bleed takes a width" in capsys.readouterr().err
+
+
+def test_a_print_compensated_for_the_bleed_is_verified_as_it_prints(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    # its pre-sharpened texture is only right blurred: read as written it would score its halos
+    from saucerfab.fabricate.options import FabOptions
+    from saucerfab.verify.bleed import compensated_width
+
+    folder = tmp_path / "print"
+    export_design(painted_design(0.0, resolution=20), folder, printer="j55", formats=["obj"], cup_diameter_mm=80,
+                  options=FabOptions(texture_px=512, bleed_compensation="on"))
+    assert compensated_width(folder) == load_profile("j55").colour_bleed_mm
+    args = ["verify", str(folder), "--eyes", "design", "--res", "48", "--spp", "4", "--primary-only",
+            "--min-psnr", "0", "--min-coverage", "0", "--max-stray", "1"]
+    assert main([*args, "--json", "-q", "-o", str(tmp_path / "a")]) == 0
+    assert json.loads(capsys.readouterr().out)["bleed_mm"] == load_profile("j55").colour_bleed_mm
+    assert main([*args, "-q", "-o", str(tmp_path / "b")]) == 0
+    assert "(the texture was compensated for the printer's bleed)" in capsys.readouterr().out
+    assert main([*args, "--bleed", "0.3", "--json", "-q", "-o", str(tmp_path / "c")]) == 0
+    assert json.loads(capsys.readouterr().out)["bleed_mm"] == 0.3  # a width asked for wins
+    doc = json.loads((folder / "export.json").read_text())
+    doc["bleed"]["sigma_mm"] = "0.12; rm -rf /"  # a hand-edited record is not trusted
+    (folder / "export.json").write_text(json.dumps(doc))
+    assert compensated_width(folder) is None
