@@ -17,7 +17,6 @@ right as it prints, and read as written it would score its halos.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -25,27 +24,15 @@ from pathlib import Path
 import numpy as np
 
 from saucerfab.errors import ConfigError
-from saucerfab.verify.printfolder import MAX_SCENE_JSON_BYTES, PrintedSurface
+from saucerfab.verify.printfolder import PrintedSurface, export_record
 
 #: ``--bleed`` without a width: the width of the printer the folder was exported for
 BLEED_OF_PRINTER = "printer"
 
 
-def _export_record(folder: Path) -> dict:
-    """``export.json`` of a print folder (bounded), or {} when it is missing or unreadable."""
-    try:
-        path = folder / "export.json"
-        if path.stat().st_size > MAX_SCENE_JSON_BYTES:
-            return {}
-        doc = json.loads(path.read_bytes().decode("utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
-        return {}
-    return doc if isinstance(doc, dict) else {}
-
-
 def export_printer(folder: Path) -> str | None:
     """The printer key ``export.json`` names, or None when it is missing or unreadable."""
-    printer = _export_record(folder).get("printer")
+    printer = export_record(folder).get("printer")
     key = printer.get("key") if isinstance(printer, dict) else None
     return key if isinstance(key, str) else None
 
@@ -55,7 +42,7 @@ def compensated_width(folder: Path) -> float | None:
     it in ``export.json``), or None: not compensated, or nothing was (a printer with no width)."""
     from saucerfab.model.profiles import MAX_COLOUR_BLEED_MM
 
-    record = _export_record(folder)
+    record = export_record(folder)
     options, bleed = record.get("options"), record.get("bleed")
     if not (isinstance(options, dict) and options.get("bleed_compensation") == "on" and isinstance(bleed, dict)):
         return None

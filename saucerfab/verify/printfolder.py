@@ -179,19 +179,25 @@ def folder_limits(folder: Path) -> Any:
     )
 
 
-def design_parameters(folder: Path) -> dict[str, Any]:
-    """The parameters of the design a print folder was exported from (``export.json``), or {} when unreadable.
-
-    Read with the same bound as ``scene.json``; what verify takes from it
-    (the eyes the design was made for) falls back to its defaults.
-    """
+def export_record(folder: Path) -> dict[str, Any]:
+    """A print folder's ``export.json``, read with the same bound as ``scene.json``, or {} when unreadable."""
     try:
         path = folder / "export.json"
         if path.stat().st_size > MAX_SCENE_JSON_BYTES:
             return {}
-        params = json.loads(path.read_bytes().decode("utf-8"))["design"]["parameters"]
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError, KeyError, TypeError):
+        doc = json.loads(path.read_bytes().decode("utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
         return {}
+    return doc if isinstance(doc, dict) else {}
+
+
+def design_parameters(folder: Path) -> dict[str, Any]:
+    """The parameters of the design a print folder was exported from (``export.json``), or {} when unreadable.
+
+    What verify takes from it (the eyes the design was made for) falls back to its defaults.
+    """
+    design = export_record(folder).get("design")
+    params = design.get("parameters") if isinstance(design, dict) else None
     return params if isinstance(params, dict) else {}
 
 

@@ -47,13 +47,19 @@ def small_rig():
     return scene, base, Rig(scene, base, image_size=96)
 
 
-def test_four_cases_uvs_and_both_average(small_rig) -> None:  # noqa: ANN001
-    scene, base, rig = small_rig
-    t = 64
+def red_and_blue(t: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two plain (t, t, 3) pictures in [0, 1]: red for the direct view, blue for the reflected one."""
     red = np.zeros((t, t, 3))
     red[..., 0] = 1.0
     blue = np.zeros((t, t, 3))
     blue[..., 2] = 1.0
+    return red, blue
+
+
+def test_four_cases_uvs_and_both_average(small_rig) -> None:  # noqa: ANN001
+    scene, base, rig = small_rig
+    t = 64
+    red, blue = red_and_blue(t)
     res = texture_saucer(rig, base, {"direct": red, "reflected": blue})
     fv = res.face_view
     for case in (FaceView.NEITHER, *FRAMED_VIEWS):
@@ -103,10 +109,7 @@ def test_a_face_seen_in_both_views_blends_them_by_its_share_of_each(small_rig,  
 
     scene, base, rig = small_rig
     t = 64
-    red = np.zeros((t, t, 3))
-    red[..., 0] = 1.0
-    blue = np.zeros((t, t, 3))
-    blue[..., 2] = 1.0
+    red, blue = red_and_blue(t)
     res = texture_saucer(rig, base, {"direct": red, "reflected": blue})
     samples = rig.face_samples(base, 2)
     right = res.texture[:, t:].reshape(-1, 3).astype(float)

@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from test_optimize_texturing import red_and_blue
 
 from saucerfab.errors import ConfigError
 from saucerfab.model.camera import Camera
@@ -143,10 +144,7 @@ def test_gradcheck_of_the_surround_energy_on_a_tiny_rig() -> None:
 def test_texture_gives_faces_seen_only_around_the_frames_their_background(rig_and_base) -> None:  # noqa: ANN001
     scene, base, rig = rig_and_base
     t = 32
-    red = np.zeros((t, t, 3))
-    red[..., 0] = 1.0
-    blue = np.zeros((t, t, 3))
-    blue[..., 2] = 1.0
+    red, blue = red_and_blue(t)
     plain = texture_saucer(rig, base, {"direct": red, "reflected": blue})
     wholes = whole_views(rig, base)
     visible = rig.visible_faces(base)
