@@ -9,14 +9,19 @@ it is seen in. The texture is the input images side by side::
     |  direct   | reflected | reflected2  | surround  |    each panel T x T, the view's whole frame
     +-----------+-----------+-------------+-----------+
 
-A face seen in both views takes its reflected-image coordinates, and the
-reflected panel's texels under it become the mean of the two images'
-colours there weighted by the face's share of each view's picture (its
-samples in each; :data:`BOTH_WEIGHTING`): the colour that leaves the least
-squared error over both pictures. The paper's rule is the plain average,
-which paints a sliver the eye barely sees half in the other picture's
-colour however large it is in that picture (the dark specks of a photograph's
-reflected picture across a direct one). Faces no frame sees but the
+A face seen in both views takes its coordinates in the view it is larger in
+(more samples; the paper: always the reflected image's), and that panel's
+texels under it become the mean of the two images' colours there weighted
+by the face's share of each view's picture (its samples in each;
+:data:`BOTH_WEIGHTING`): the colour that leaves the least squared error
+over both pictures. The paper's rule is the plain average in the reflected
+panel, which paints a sliver the eye barely sees half in the other
+picture's colour however large it is in that picture (the dark specks of a
+photograph's reflected picture across a direct one); and a slope seen
+broadly on the saucer but as a sliver in the cup has almost no texels of
+its own in the reflected panel, so it showed its reflected neighbours'
+colours across the direct picture (specks of the other picture along the
+round saucer's rings: 6.7 dB of astronaut-rocket's direct view). Faces no frame sees but the
 design eye sees around them (:mod:`saucerfab.optimize.surround`) take the
 background of the view they are seen in, from the last panel (stripes of
 those colours; FaceView.SURROUND). Faces seen in neither keep their
@@ -155,6 +160,9 @@ def texture_saucer(
     # float64 copies, clipped as they are made: each big array made once (first
     # touches of fresh memory cost ~10 us a page on the machines measured)
     panels = [np.clip(images[n], 0, 1, out=np.empty(images[n].shape, np.float64)) for n in names]
+    # the reflected pictures as given, for faces seen in both that keep the direct panel (their
+    # panels' texels change as faces blend into them)
+    reflected_images = [None] + [np.clip(images[n], 0, 1).astype(np.float64) for n in names[1:]]
     for p, view in enumerate(rig.views[1:], start=1):
         if view.faces.shape[0] == 0:
             continue
@@ -162,30 +170,21 @@ def texture_saucer(
         src = view.face_src.numpy()
         uv_r = _uv_from_ndc(ndc_r[view.faces.numpy()], p, k)
         seen = visible[view.name][src]
-        use = src[seen]
-        face_uvs[use] = uv_r[seen]
-        face_panel[use] = p
-        # Faces seen in both: the two images under the face, blended in the reflected
-        # panel (paper: modify the reflected image's texels), weighted by the face's samples
+        # Faces seen in both: the two images under the face blended by the face's samples,
+        # in the panel of the view it is larger in (paper: always the reflected panel)
         both = seen & (face_view[src] == FaceView.BOTH)
+        on_direct = both & _keeps_direct(samples["direct"][src], samples[view.name][src])
+        use = src[seen & ~on_direct]
+        face_uvs[use] = uv_r[seen & ~on_direct]
+        face_panel[use] = p
         if both.any():
-            tri_r = ndc_to_texel(ndc_r[view.faces.numpy()[both]], t)
-            pix, ti, bary = raster_triangles_2d(tri_r, t, t)
-            tri_d = ndc_to_texel(ndc_d[faces[src[both]]], t)
-            pos_d = np.einsum("kc,kcd->kd", bary, tri_d[ti])
-            col_d = sample_bilinear(panels[0], pos_d)
-            w_d, w_r = _both_weights(samples["direct"][src[both]], samples[view.name][src[both]])
-            flat = panels[p].reshape(-1, 3)
-            # a texel under several faces is blended once: the faces' mean weights, the direct
-            # colours' mean by their weights
-            cnt = np.bincount(pix, minlength=t * t).astype(np.float64)
-            wd = np.bincount(pix, weights=w_d[ti], minlength=t * t)
-            wr = np.bincount(pix, weights=w_r[ti], minlength=t * t)
-            acc = np.stack([np.bincount(pix, weights=w_d[ti] * col_d[:, c], minlength=t * t) for c in range(3)], 1)
-            hit = cnt > 0
-            mean_d = acc[hit] / wd[hit, None]
-            share_d = (wd[hit] / (wd[hit] + wr[hit]))[:, None]
-            flat[hit] = (1.0 - share_d) * flat[hit] + share_d * mean_d
+            w_d, w_r = _both_weights(samples["direct"][src], samples[view.name][src])
+            tri_r = ndc_to_texel(ndc_r[view.faces.numpy()], t)
+            tri_d = ndc_to_texel(ndc_d[faces[src]], t)
+            on_r = both & ~on_direct
+            _blend_both(panels[p], tri_r[on_r], tri_d[on_r], panels[0], w_r[on_r], w_d[on_r])
+            _blend_both(panels[0], tri_d[on_direct], tri_r[on_direct], reflected_images[p], w_d[on_direct],
+                        w_r[on_direct])
     if surround:  # the last panel, before the eyes' blend: its UVs are in k panels' units
         panels.append(_surround_panel(surround, face_uvs, face_panel, face_view, t, k))
     if eyes:  # (the surround's faces are not the frames': the blend leaves them)
@@ -211,6 +210,49 @@ def _both_weights(direct: np.ndarray, reflected: np.ndarray) -> tuple[np.ndarray
     if BOTH_WEIGHTING == "even":
         return np.ones(direct.shape), np.ones(reflected.shape)
     return direct.astype(np.float64), reflected.astype(np.float64)
+
+
+def _keeps_direct(direct: np.ndarray, reflected: np.ndarray) -> np.ndarray:
+    """(K,) bool: faces seen in both that keep their direct-panel coordinates: larger in the direct
+    view's picture (more samples). A face's colour lives in its texels: a slope seen broadly
+    on the saucer and as a sliver in the cup has almost no texels of its own in the reflected
+    panel (none, often, under the sliver), so its colour there would be its reflected
+    neighbours', seen across the direct picture as specks of the other picture."""
+    if BOTH_WEIGHTING == "even":  # the paper's rule: always the reflected panel
+        return np.zeros(direct.shape, bool)
+    return direct > reflected
+
+
+def _blend_both(
+    panel: np.ndarray,
+    tri_own: np.ndarray,
+    tri_other: np.ndarray,
+    other: np.ndarray,
+    w_own: np.ndarray,
+    w_other: np.ndarray,
+) -> None:
+    """Blend, in place, ``panel`` (T, T, 3)'s texels under K faces seen in both views with the other view's picture.
+
+    Args:
+        tri_own: (K, 3, 2) the faces' corners in ``panel`` (continuous texels).
+        tri_other: (K, 3, 2) the same corners in ``other`` (T, T, 3), the other view's picture.
+        w_own, w_other: (K,) the faces' weights of the two views (:func:`_both_weights`).
+    """
+    if not tri_own.shape[0]:
+        return
+    t = panel.shape[0]
+    pix, ti, bary = raster_triangles_2d(tri_own, t, t)
+    col = sample_bilinear(other, np.einsum("kc,kcd->kd", bary, tri_other[ti]))
+    flat = panel.reshape(-1, 3)
+    # a texel under several faces is blended once: the faces' mean weights, the other
+    # colours' mean by their weights
+    wo = np.bincount(pix, weights=w_other[ti], minlength=t * t)
+    ws = np.bincount(pix, weights=w_own[ti], minlength=t * t)
+    acc = np.stack([np.bincount(pix, weights=w_other[ti] * col[:, c], minlength=t * t) for c in range(3)], 1)
+    hit = np.bincount(pix, minlength=t * t) > 0
+    mean_o = acc[hit] / wo[hit, None]
+    share_o = (wo[hit] / (wo[hit] + ws[hit]))[:, None]
+    flat[hit] = (1.0 - share_o) * flat[hit] + share_o * mean_o
 
 
 def _surround_panel(
