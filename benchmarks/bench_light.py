@@ -19,6 +19,11 @@ shading pattern of the relief and of a flat plate (dB, and 5th-95th
 percentiles of white / smooth), how bright a white print looks there, and
 the wall times (the issue's target: the lit verify within 2x the emitted
 one's on two cores).
+
+``--shading-compensation room`` (or ``ambient``) adds a second arm: the same
+design exported with that ``saucerfab export --shading-compensation``, verified
+in emitted light and under ``--light room`` (seed 0, the design eye), and a
+second table, uncompensated against compensated, per view and eye.
 """
 
 from __future__ import annotations
@@ -56,6 +61,15 @@ def make_export(pair: str, tmp: Path) -> tuple[Path, str]:
                        "saucerfab export D --out P --no-verify")
 
 
+def export_shaded(design: Path, out: Path, light: str) -> str:
+    """The design exported again with ``--shading-compensation light`` into ``out``; the command."""
+    t0 = time.perf_counter()
+    if cli(["export", str(design), "--out", str(out), "--quiet", "--no-verify", "--shading-compensation", light]) != 0:
+        raise SystemExit(f"export --shading-compensation {light} failed")
+    print(f"export --shading-compensation {light} {time.perf_counter() - t0:.0f} s", flush=True)
+    return f"saucerfab export D --out P2 --no-verify --shading-compensation {light}"
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--pair", default=DEMO_PAIR, choices=list(PAIRS))
@@ -64,7 +78,11 @@ def main() -> int:
     p.add_argument("--res", type=int, default=256)
     p.add_argument("--spp", type=int, default=16)
     p.add_argument("--keep", help="write the verify pictures under this folder (emitted/, room/)")
+    p.add_argument("--shading-compensation", choices=("ambient", "room"),
+                   help="a second arm: the design exported with this --shading-compensation, verified likewise")
     args = p.parse_args()
+    if args.shading_compensation and args.print_dir:
+        p.error("--shading-compensation exports the design made here: leave out --print-dir")
     print(f"machine: {machine()}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         if args.print_dir:
@@ -79,6 +97,15 @@ def main() -> int:
                             pictures_dir=keep / f"room{seed}" if keep else None, **common) for seed in (0, 1)]
         every = verify_print(folder, light=room, metal=args.metal, lit_eye_choice="all",
                              pictures_dir=keep / "room_all" if keep else None, **common)
+        if args.shading_compensation:
+            shaded = Path(tmp) / "print_shaded"
+            shaded_made = export_shaded(Path(tmp) / "design", shaded, args.shading_compensation)
+            import json
+
+            block = json.loads((shaded / "export.json").read_text())["shading"]
+            arm = [verify_print(shaded, pictures_dir=keep / "emitted_shaded" if keep else None, **common),
+                   verify_print(shaded, light=room, metal=args.metal, lit_seed=0,
+                                pictures_dir=keep / "room_shaded" if keep else None, **common)]
     print()
     print(f"pair {args.pair}: {made}")
     print(f"verify P --eyes both --res {args.res} --spp {args.spp} --primary-only "
@@ -101,6 +128,26 @@ def main() -> int:
           f"{lit[1].seconds:.1f} s (of which lit {lit[0].lit_seconds:.1f} s and {lit[1].lit_seconds:.1f} s): "
           f"{lit[0].seconds / emitted.seconds:.2f}x and {lit[1].seconds / emitted.seconds:.2f}x the emitted verify; "
           f"--lit-eyes all {every.seconds:.1f} s (lit {every.lit_seconds:.1f} s): {every.seconds / emitted.seconds:.2f}x")
+    if args.shading_compensation:
+        print()
+        print(f"second arm: {shaded_made} (shading block: power {block['power']:g}, global factor "
+              f"{block['global_factor']:.2f}, the top's mean linear albedo {block['brightness_ratio']:.3f}x the "
+              f"plain one's, clipped {100 * block['clipped_share']:.2f} % of the top's texel channels, pattern p5-p95 "
+              f"{block['pattern_p5_p95'][0]:.2f}-{block['pattern_p5_p95'][1]:.2f})")
+        print()
+        print("| view | eye | emitted dB: plain -> compensated | lit dB (seed 0): plain -> compensated "
+              "| gain R,G,B compensated |")
+        print("|---|---|---|---|---|")
+        plain_lit = {(v.eye, v.view): v for v in lit[0].lit_views}
+        for v in arm[1].lit_views:
+            e0, e1 = emitted.score(v.view, v.eye), arm[0].score(v.view, v.eye)
+            p0 = plain_lit[(v.eye, v.view)]
+            print(f"| {v.view} | {v.eye} | {e0.psnr_db:.1f} -> {e1.psnr_db:.1f} | {p0.lit_psnr_db:.1f} -> "
+                  f"{v.lit_psnr_db:.1f} | {', '.join(f'{g:.2f}' for g in v.gain_rgb)} |")
+        for eye in ("left", "right"):
+            for view in ("direct", "reflected"):
+                e0, e1 = emitted.score(view, eye), arm[0].score(view, eye)
+                print(f"| {view} | {eye} | {e0.psnr_db:.1f} -> {e1.psnr_db:.1f} | | |")
     return 0
 
 

@@ -28,6 +28,7 @@ from saucerfab.fabricate.options import (
     BLEED_COMPENSATIONS,
     NEUTRAL_WALL_RGB,
     SEAT_KINDS,
+    SHADING_COMPENSATIONS,
     FabOptions,
 )
 from saucerfab.files.formats import FORMATS, WRITERS, labels
@@ -108,6 +109,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     c.add_argument("--bleed-compensation", dest="bleed_compensation", choices=BLEED_COMPENSATIONS,
                    help="pre-sharpen the texture for the printer's colour bleed (its profile's colour_bleed_mm), so "
                         f"the print's colours blur into the design's (default {_default('bleed_compensation')})")
+    c.add_argument("--shading-compensation", dest="shading_compensation", choices=SHADING_COMPENSATIONS,
+                   help="divide the texture by the shading the relief casts on itself under a light, so the print "
+                        "lit by it shows the pictures evenly: ambient (a uniform room: the relief's ambient "
+                        "occlusion) or room (verify --light room: that room and its lamp); the top comes out "
+                        "at most 1.3x darker, and reads low in verify's emitted light "
+                        f"(default {_default('shading_compensation')})")
     c.add_argument("--zip-obj", dest="obj_zip", action="store_const", const=True,
                    help="write OBJ + MTL + PNG as one zip (what bureaus ask for)")
     c.add_argument("--name", dest="name", help=f"file stem of the written files (default {_default('name')})")

@@ -205,5 +205,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"  the colours blurred as printed: a bleed of {result.bleed_mm:g} mm"
                   + ("" if args.bleed is not None else " (the texture was compensated for the printer's bleed)"))
         print_lit_scores(result)
+        if result.light is None:  # emitted light: a texture compensated for a light's shading reads low here
+            from saucerfab.verify.printfolder import shading_note
+
+            note = shading_note(folder)
+            if note is not None:
+                print(f"  {note}")
         print(f"  pictures and verify.json in {out}")
     return result.exit_code

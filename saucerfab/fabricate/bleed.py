@@ -434,12 +434,19 @@ def compensate_top(page: np.ndarray, layout: AtlasLayout, px_per_mm: float, sigm
         A new (S, S, 3) uint8 page.
     """
     out = compensate_bleed(page, [layout.top], px_per_mm, sigma_mm)
+    refill_gutter(out, layout)
+    return out
+
+
+def refill_gutter(page: np.ndarray, layout: AtlasLayout) -> None:
+    """Refill the gutter around the top region of ``page`` (S, S, 3) with its edge texels, in place, as
+    :func:`.bake.compose_page` makes it: after a pass that changed the top's texels (this module's,
+    :mod:`.shading`'s), so that a sample across the top's edge still reads the top's colour."""
     t, p, s = layout.top, layout.padding, layout.size
     r0, r1 = max(t.y - p, 0), min(t.y + t.h + p, s)
     c0, c1 = max(t.x - p, 0), min(t.x + t.w + p, s)
-    top = _region(out, t)
-    out[r0:r1, c0:c1] = np.pad(top, ((t.y - r0, r1 - t.y - t.h), (t.x - c0, c1 - t.x - t.w), (0, 0)), mode="edge")
-    return out
+    top = _region(page, t).copy()
+    page[r0:r1, c0:c1] = np.pad(top, ((t.y - r0, r1 - t.y - t.h), (t.x - c0, c1 - t.x - t.w), (0, 0)), mode="edge")
 
 
 # --------------------------------------------------------------------------- a textured mesh, as verify reads it

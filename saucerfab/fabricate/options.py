@@ -19,6 +19,9 @@ SeatKind = Literal["recess", "ring", "none"]
 SEAT_KINDS: tuple[str, ...] = ("recess", "ring", "none")
 BleedCompensation = Literal["on", "off"]
 BLEED_COMPENSATIONS: tuple[str, ...] = ("on", "off")
+#: ``off``, or the light whose shading the texture is compensated for (:mod:`saucerfab.fabricate.shading`)
+ShadingCompensation = Literal["off", "ambient", "room"]
+SHADING_COMPENSATIONS: tuple[str, ...] = ("off", "ambient", "room")
 
 #: texture atlas edges we accept (a power of two keeps mipmaps exact)
 MIN_TEXTURE_PX, MAX_TEXTURE_PX = 64, 16384
@@ -82,6 +85,16 @@ class FabOptions:
             so that the print's blurred colours come closer to the design's; the per-vertex colours
             (PLY) stay the design's. ``off`` (the default): the texture as designed. Recorded in
             ``export.json`` with the width used (``bleed``) only when on.
+        shading_compensation: ``ambient`` or ``room`` divides the top's albedo by the shading pattern
+            its relief casts on itself under that light (:mod:`saucerfab.fabricate.shading`: ``ambient``
+            the room's uniform environment alone, its ambient occlusion; ``room`` verify's ``--light
+            room``, that environment and its lamp) raised to a power below 1, then darkens the whole
+            top by one factor, at most :data:`saucerfab.fabricate.shading.MAX_DARKENING` in mean
+            linear albedo, and clips what is left out of range (a 3.5x darker print scored 0.5 dB
+            more under the light: a person sees the darkness, the score's gain does not); the
+            per-vertex colours (PLY) stay the design's.
+            Before the bleed compensation when both are on (sharpen what prints). ``off`` (the
+            default): the texture as designed. Recorded in ``export.json`` (``shading``) only when on.
         obj_zip: write OBJ + MTL + PNG as one ``.zip`` (what bureaus ask for)
             instead of three loose files.
         name: file stem of the written files (``saucer.3mf`` ...).
@@ -103,6 +116,7 @@ class FabOptions:
     mirror_rgb: tuple[int, int, int] | None = None
     inpaint: Literal["harmonic", "none"] = "harmonic"
     bleed_compensation: BleedCompensation = "off"
+    shading_compensation: ShadingCompensation = "off"
     obj_zip: bool = False
     name: str = "saucer"
     coord_decimals: int = 5
@@ -145,6 +159,11 @@ class FabOptions:
                 f"bleed_compensation must be {' or '.join(map(repr, BLEED_COMPENSATIONS))}, "
                 f"got {self.bleed_compensation!r}"
             )
+        if self.shading_compensation not in SHADING_COMPENSATIONS:
+            raise ConfigError(
+                f"shading_compensation must be one of {', '.join(map(repr, SHADING_COMPENSATIONS))}, "
+                f"got {self.shading_compensation!r}"
+            )
         if (
             not isinstance(self.name, str)
             or not self.name
@@ -178,14 +197,16 @@ class FabOptions:
         Without a rim (``saucer_rim_mm`` 0) the rim's two settings are left
         out: they shape nothing, and a part without a rim is recorded
         (``export.json``) exactly as before the rim existed. So is
-        ``bleed_compensation`` when off: an export without it is the one made
-        before the option existed, byte for byte.
+        ``bleed_compensation`` when off, and ``shading_compensation``: an export
+        without them is the one made before the options existed, byte for byte.
         """
         d = asdict(self)
         if not self.saucer_rim_mm:
             del d["saucer_rim_mm"], d["saucer_rim_height_mm"]
         if self.bleed_compensation == "off":
             del d["bleed_compensation"]
+        if self.shading_compensation == "off":
+            del d["shading_compensation"]
         for key in ("wall_rgb", "mirror_rgb"):
             d[key] = None if getattr(self, key) is None else list(getattr(self, key))
         return d

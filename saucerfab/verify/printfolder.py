@@ -201,6 +201,20 @@ def design_parameters(folder: Path) -> dict[str, Any]:
     return params if isinstance(params, dict) else {}
 
 
+def shading_note(folder: Path) -> str | None:
+    """The line ``verify`` prints in emitted light for a print whose texture ``export --shading-compensation``
+    compensated for a light's shading (``export.json``'s options): its colours are only right under that
+    light, so its emitted scores read low. None for any other print (or an unreadable record)."""
+    from saucerfab.fabricate.options import SHADING_COMPENSATIONS
+
+    options = export_record(folder).get("options")
+    light = options.get("shading_compensation") if isinstance(options, dict) else None
+    if light == "off" or light not in SHADING_COMPENSATIONS:
+        return None
+    return (f"this print's colours are compensated for the {light} light's shading (export --shading-compensation "
+            f"{light}); verify it with --light room to score it as it will be seen")
+
+
 def read_surface(path: Path, fmt: str, scene: PrintScene, limits: Any = None) -> PrintedSurface:
     """Read one exported mesh file with its textures (bounded, as the checker reads).
 
