@@ -248,3 +248,16 @@ def canvas_is_drawn(png: bytes, *, min_std: float = 6.0, min_colours: int = 64) 
         return False
     colours = np.unique(rgb.reshape(-1, 3), axis=0).shape[0]
     return float(rgb.std()) > min_std and colours > min_colours
+
+
+def wait_for(page: Any, what: str, check: Callable[[], Any], timeout_s: float, errors: list[str],
+             faults: Callable[[list[str]], list[str]]) -> Any:
+    """Poll ``check()`` every 100 ms until truthy and return its value; fail early on a page error
+    (``faults(errors)``: the errors that are faults, not ones the test expects), naming what was awaited."""
+    t0 = time.monotonic()
+    while not (value := check()):
+        hard = faults(errors)
+        assert not hard, f"page errors while waiting for {what}: {hard}"
+        assert time.monotonic() - t0 < timeout_s, f"timed out after {timeout_s} s waiting for {what}"
+        page.wait_for_timeout(100)
+    return value

@@ -44,6 +44,7 @@ from saucerfab.studio import options as opts
 from saucerfab.studio.auth import USER_KEY, Auth, SignIn, User, login_routes, session_cookie_name
 from saucerfab.studio.guard import LOOPBACK_NAMES, HostOriginGuard
 from saucerfab.studio.jobs import DEFAULT_JOBS, DEFAULT_MAX_QUEUED_PER_USER, Job, JobQueue
+from saucerfab.studio.lit import LIT_ACTIVE, lit_entry, queue_lit
 from saucerfab.studio.results import SERVED_SUFFIXES, design_results, export_details, thumb_url, viewer_page
 from saucerfab.studio.workspace import (
     FINAL,
@@ -460,11 +461,22 @@ def create_app(
             old = rec.setdefault("exports", {}).get(printer, {})
             if old.get("status") in ("queued", "running"):
                 raise Conflict(f"run {run_id} is already exporting for {printer}; wait until it is done")
+            if (lit_entry(rec, printer) or {}).get("status") in LIT_ACTIVE:  # it reads the folder an export replaces
+                raise Conflict(f"the export for {printer} is being rendered under the room light; wait until it is "
+                               "done, then export again")
             rec["exports"][printer] = dict(entry)
 
         rec = await run_in_threadpool(ws.update_run, run_id, change)
         _submit(Job("export", run_id, printer), owner_of(rec))
         return _json_response(export_details(run_id, ws.run_dir(run_id), printer, entry), 202)
+
+    async def start_lit(request: Request) -> Response:
+        """An export seen under the room light (:mod:`saucerfab.studio.lit`): a queued ``lit`` job; 202."""
+        run_id, printer = await _run(request), request.path_params["printer"]
+        rec = await run_in_threadpool(queue_lit, ws, run_id, printer)
+        _submit(Job("lit", run_id, printer), owner_of(rec))
+        return _json_response(await run_in_threadpool(export_details, run_id, ws.run_dir(run_id), printer,
+                                                      rec["exports"][printer]), 202)
 
     def _export_entry(run_id: str, printer: str) -> dict[str, Any]:
         entry = ws.read_run(run_id).get("exports", {}).get(printer)
@@ -517,6 +529,8 @@ def create_app(
             _submit(Job("design", run_id), owners.get(run_id, SHARED_USER))
         for run_id, printer in exports:
             _submit(Job("export", run_id, printer), owners.get(run_id, SHARED_USER))
+        for run_id, printer in await run_in_threadpool(ws.queued_lits):  # exports asked for under the room light
+            _submit(Job("lit", run_id, printer), owners.get(run_id, SHARED_USER))
         try:
             yield
         finally:
@@ -546,6 +560,7 @@ def create_app(
         Route("/api/runs/{id}/exports", start_export, methods=["POST"]),
         Route("/api/runs/{id}/exports/{printer}.zip", export_zip),
         Route("/api/runs/{id}/exports/{printer}", get_export),
+        Route("/api/runs/{id}/exports/{printer}/lit", start_lit, methods=["POST"]),
     ]
     app = Starlette(
         routes=routes,

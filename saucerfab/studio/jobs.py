@@ -50,11 +50,19 @@ DEFAULT_MAX_QUEUED_PER_USER = 4
 
 @dataclass(frozen=True)
 class Job:
-    """One unit of work: a run's design, or its export for one printer."""
+    """One unit of work: a run's design, its export for one printer, or that export seen under the room light."""
 
-    kind: str  # "design" or "export"
+    kind: str  # "design", "export", or "lit" (an export seen under the room light: saucerfab.studio.lit)
     run_id: str
     printer: str | None = None
+
+
+def job_entry(rec: dict[str, Any], job: Job) -> dict[str, Any] | None:
+    """The part of a run's record an export or lit job reports in: the export's entry, or its ``lit``."""
+    e = rec.get("exports", {}).get(job.printer or "")
+    if job.kind == "lit":
+        e = e.get("lit") if isinstance(e, dict) else None
+    return e if isinstance(e, dict) else None
 
 
 @dataclass(frozen=True)
@@ -353,7 +361,7 @@ class JobQueue:
                     return  # cancelled or deleted while it waited
                 rec.update(status="running", started=now_iso(), finished=None, error=None)
             else:
-                e = rec.get("exports", {}).get(job.printer or "")
+                e = job_entry(rec, job)
                 if not e or e.get("status") != "queued":
                     return
                 e.update(status="running", started=now_iso(), error=None)
@@ -405,10 +413,14 @@ class JobQueue:
                                error=f"the design worker stopped unexpectedly ({why}); what it said is in {log}. "
                                "Resume continues after the last stage that had finished")
             else:
-                e = rec.get("exports", {}).get(job.printer or "")
-                if e and e.get("status") in ("queued", "running"):
-                    e.update(status="failed", error=f"the export worker stopped unexpectedly ({why}); what it "
-                             f"said is in {log}. Start the export again")
+                e = job_entry(rec, job)
+                what, again = (("verify under the room light", "Ask for it again") if job.kind == "lit"
+                               else ("export", "Start the export again"))
+                # "running" only: a "queued" entry is a new request, made while this worker was ending (an
+                # export asked for again the moment the last one was done), and starts once it has ended
+                if e and e.get("status") == "running":
+                    e.update(status="failed", error=f"the {what} worker stopped unexpectedly ({why}); what it "
+                             f"said is in {log}. {again}", **({"progress": None} if job.kind == "lit" else {}))
 
         try:
             self.ws.update_run(job.run_id, change)
@@ -420,7 +432,7 @@ class JobQueue:
             if job.kind == "design":
                 rec.update(status="failed", error=message, finished=now_iso())
             else:
-                rec.get("exports", {}).get(job.printer or "", {}).update(status="failed", error=message)
+                (job_entry(rec, job) or {}).update(status="failed", error=message)
 
         try:
             self.ws.update_run(job.run_id, change)

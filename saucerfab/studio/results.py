@@ -27,6 +27,11 @@ RESULT_IMAGES = {
 }
 #: the viewer page's cache in the run folder
 VIEWER_NAME = "viewer.html"
+#: an export's verify under the room light, when asked for (:mod:`saucerfab.studio.lit`), beside its own ``verify/``
+LIT_DIR = "verify_room"
+#: the figures of a lit view (verify.json's ``lit_views``) the API passes on
+LIT_FIELDS = ("view", "eye", "lit_psnr_db", "shading_pattern_db", "flat_pattern_db", "shading_p5", "shading_p95",
+              "flat_p5", "flat_p95", "white_level", "gain_rgb")
 #: the largest JSON file read for the results, bytes
 _MAX_JSON = 8 << 20
 
@@ -71,6 +76,46 @@ def verify_rows(run_id: str, folder: Path, rel: str) -> list[dict[str, Any]]:
                      "passed": w.get("passed"),
                      "picture_url": file_url(run_id, f"{rel}/verify/{pic}") if ok else None})
     return rows
+
+
+def _picture(folder: Path, name: Any) -> bool:
+    """Whether ``name`` (from a verify.json) is a bare file name of a picture in ``folder``."""
+    return isinstance(name, str) and "/" not in name and "\\" not in name and (folder / name).is_file()
+
+
+def lit_results(run_id: str, folder: Path, rel: str) -> dict[str, Any] | None:
+    """The views of ``folder/verify_room/verify.json`` (``rel``: ``folder`` relative to the run), None if absent.
+
+    Returns ``{"light": kind, "cup_metal": name, "res", "spp", "views": [...]}``, one view per
+    ``lit_views`` entry: its figures (:data:`LIT_FIELDS`: lit PSNR and the shading pattern beside a flat
+    plate's, dB; the shading's 5th-95th percentile range, x its smooth part; a white print's level)
+    with ``lit_picture_url`` (the ``*_lit.png``) and, from the same verify's emitted render of that
+    view and eye, ``emitted_psnr_db`` and ``emitted_picture_url``.
+    """
+    where = folder / LIT_DIR
+    ver = _json(where / "verify.json")
+    if ver is None or not isinstance(ver.get("light"), dict):
+        return None
+    emitted: dict[tuple[Any, Any], dict[str, Any]] = {}
+    for f in ver.get("files", [])[:1]:
+        for v in f.get("views", []) if isinstance(f, dict) else []:
+            if isinstance(v, dict):
+                emitted[(v.get("view"), v.get("eye"))] = v
+
+    def url(name: Any) -> str | None:
+        return file_url(run_id, f"{rel}/{LIT_DIR}/{name}") if _picture(where, name) else None
+
+    views = []
+    for lv in ver.get("lit_views", []):
+        if not isinstance(lv, dict):
+            continue
+        ev = emitted.get((lv.get("view"), lv.get("eye")), {})
+        views.append({**{k: lv.get(k) for k in LIT_FIELDS}, "lit_picture_url": url(lv.get("picture")),
+                      "emitted_psnr_db": ev.get("psnr_db"), "emitted_picture_url": url(ev.get("picture"))})
+    light = ver["light"]
+    metal = light.get("cup_metal")
+    return {"light": light.get("kind"), "cup_metal": metal.get("name") if isinstance(metal, dict) else None,
+            "res": ver.get("res"), "spp": ver.get("spp"), "views": views}
 
 
 def design_results(run_id: str, run_dir: Path) -> dict[str, Any] | None:
@@ -143,6 +188,10 @@ def export_details(run_id: str, run_dir: Path, printer: str, entry: dict[str, An
         out["zip_url"] = f"/api/runs/{run_id}/exports/{printer}.zip"
         out["file_urls"] = {f: file_url(run_id, f"{rel}/{f}") for f in entry.get("files", [])
                             if Path(f).suffix.lower() in SERVED_SUFFIXES}
+        lit = entry.get("lit")
+        if isinstance(lit, dict):  # asked for (POST .../lit): its record, and its views once done
+            shown = lit_results(run_id, folder, rel) if lit.get("status") == "done" else None
+            out["lit"] = {**lit, **(shown or {})}
     return out
 
 

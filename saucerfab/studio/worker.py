@@ -104,7 +104,7 @@ def _on_sigint(signum: int, frame: Any) -> None:
 
 
 def main(root: str, kind: str, run_id: str, printer: str | None = None) -> None:
-    """The worker process: run job ``kind`` ("design" or "export") of run ``run_id`` in workspace ``root``."""
+    """The worker process: run job ``kind`` ("design", "export" or "lit") of run ``run_id`` in workspace ``root``."""
     # Its own process group: a Ctrl-C at the server's terminal reaches the server only, which then
     # sends each worker exactly one SIGINT (a second one could cut the checkpoint's save short).
     if hasattr(os, "setpgrp"):
@@ -120,6 +120,10 @@ def main(root: str, kind: str, run_id: str, printer: str | None = None) -> None:
     watch = _ParentWatch()
     if kind == "design":
         _design_job(ws, run_id, watch)
+    elif kind == "lit":  # an export seen under the room light
+        from saucerfab.studio.lit import lit_job
+
+        lit_job(ws, run_id, str(printer))
     else:
         _export_job(ws, run_id, str(printer))
     sys.stderr.flush()

@@ -369,6 +369,11 @@ class Workspace:
             busy = [p for p, e in rec.get("exports", {}).items() if e.get("status") in ("queued", "running")]
             if busy:
                 raise Conflict(f"run {run_id} is exporting for {', '.join(busy)}; wait until it is done")
+            lit = [p for p, e in rec.get("exports", {}).items()
+                   if isinstance(e.get("lit"), dict) and e["lit"].get("status") in ("queued", "running")]
+            if lit:
+                raise Conflict(f"run {run_id} is rendering its export for {', '.join(lit)} under the room light; "
+                               "wait until it is done")
             # moved aside first (atomic), so no one sees a half-removed run
             trash = self.runs / f".deleted-{run_id}-{secrets.token_hex(4)}"
             os.replace(d, trash)
@@ -379,11 +384,13 @@ class Workspace:
 
         A run ``running`` or ``cancelling`` when the server stopped is
         ``interrupted`` (its checkpoint keeps the finished stages; ``resume``
-        continues); an export ``running`` then is ``failed`` (start it again).
+        continues); an export ``running`` then is ``failed`` (start it again),
+        and so is an export's verify under the room light (``lit``; ask for it again).
         Leftovers of interrupted uploads and deletes are removed.
 
         Returns:
-            (run ids of queued designs, oldest first; (run id, printer) of queued exports).
+            (run ids of queued designs, oldest first; (run id, printer) of queued exports). The queued
+            verifies under the room light are :meth:`queued_lits`.
         """
         incoming = [*(self.uploads / ".incoming").glob("*"), *self.root.glob("users/*/uploads/.incoming/*")]
         for p in list(self.runs.glob(".deleted-*")) + incoming:
@@ -402,6 +409,10 @@ class Workspace:
                     e.update(status="failed", error="the studio stopped during this export; start it again")
                 elif e.get("status") == "queued":
                     exports.append((rec["id"], printer))
+                lit = e.get("lit")
+                if isinstance(lit, dict) and lit.get("status") == "running":
+                    lit.update(status="failed", progress=None, error="the studio stopped during this verify under "
+                               "the room light; ask for it again")
             if rec.get("status") == "queued":
                 designs.append(rec["id"])
 
@@ -411,6 +422,13 @@ class Workspace:
             except NotFound:
                 continue
         return designs, exports
+
+    def queued_lits(self) -> list[tuple[str, str]]:
+        """(run id, printer) of the exports whose verify under the room light is queued, oldest run first
+        (after :meth:`startup_scan`: queued again at a start)."""
+        return [(rec["id"], printer) for rec in reversed(self.list_runs())
+                for printer, e in rec.get("exports", {}).items()
+                if isinstance(e, dict) and isinstance(e.get("lit"), dict) and e["lit"].get("status") == "queued"]
 
     # ------------------------------------------------------------------ uploads
 

@@ -109,15 +109,7 @@ def _shown_run(page: Any) -> str:
 
 def _wait(page: Any, what: str, check: Any, timeout_s: float, errors: list[str]) -> Any:
     """Poll ``check()`` until truthy; fail early on a page error, with what was awaited."""
-    t0 = time.monotonic()
-    while True:
-        value = check()
-        if value:
-            return value
-        hard = [e for e in errors if not _allowed(e)]
-        assert not hard, f"page errors while waiting for {what}: {hard}"
-        assert time.monotonic() - t0 < timeout_s, f"timed out after {timeout_s} s waiting for {what}"
-        page.wait_for_timeout(100)
+    return browser.wait_for(page, what, check, timeout_s, errors, lambda es: [e for e in es if not _allowed(e)])
 
 
 #: the browser logs a 4xx answer to fetch() as a console error: the bad upload's 400 is expected

@@ -15,7 +15,6 @@ browser fails the test (``tests/conftest.py``).
 from __future__ import annotations
 
 import re
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -46,18 +45,14 @@ def base(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         stop_studio(proc)
 
 
+def _wait(page: Any, what: str, check: Any, timeout_s: float, errors: list[str]) -> Any:
+    return browser.wait_for(page, what, check, timeout_s, errors, _hard)
+
+
 def _hard(errors: list[str]) -> list[str]:
     """Errors that are faults: not the expected 400, not a request the page aborted itself."""
     return [e for e in errors if not _EXPECTED_400.search(e) and "net::ERR_ABORTED" not in e]
 
-
-def _wait(page: Any, what: str, check: Any, timeout_s: float, errors: list[str]) -> Any:
-    t0 = time.monotonic()
-    while not (value := check()):
-        assert not _hard(errors), f"page errors while waiting for {what}: {_hard(errors)}"
-        assert time.monotonic() - t0 < timeout_s, f"timed out after {timeout_s} s waiting for {what}"
-        page.wait_for_timeout(100)
-    return value
 
 
 def test_the_form_offers_the_round_saucer_and_its_diameter(base: str, chromium: None) -> None:

@@ -89,7 +89,7 @@ def routes(run_id: str, upload_id: str) -> list[tuple[str, str, Any]]:
         ("POST", f"{r}/cancel", None), ("GET", f"{r}/events", None), ("POST", f"{r}/resume", None),
         ("POST", f"{r}/duplicate", {}), ("GET", f"{r}/files/run.json", None), ("GET", f"{r}/viewer", None),
         ("POST", f"{r}/exports", {"printer": "j55"}), ("GET", f"{r}/exports/j55.zip", None),
-        ("GET", f"{r}/exports/j55", None),
+        ("GET", f"{r}/exports/j55", None), ("POST", f"{r}/exports/j55/lit", None),
     ]
 
 
@@ -104,7 +104,7 @@ def _template(url: str) -> str:
     url = re.sub(r"/api/uploads/[0-9a-f]{16}", "/api/uploads/{id}", url)
     url = re.sub(r"/api/samples/\w+", "/api/samples/{name}", url)
     url = re.sub(r"/files/.*", "/files/{path:path}", url)
-    return re.sub(r"/exports/j55(\.zip)?$", lambda m: "/exports/{printer}" + (m.group(1) or ""), url)
+    return re.sub(r"/exports/j55(\.zip|/lit)?$", lambda m: "/exports/{printer}" + (m.group(1) or ""), url)
 
 
 # --------------------------------------------------------------------------- every route asks for the token

@@ -231,8 +231,17 @@ export class RunView {
         card.dataset.printer = printer;
         box.append(card);
       }
-      if (card.dataset.status === ex.status && FINAL_EXPORT.has(ex.status)) continue;
+      const litKey = litState(ex.lit);
+      if (card.dataset.status === ex.status && FINAL_EXPORT.has(ex.status)) {
+        // the export is as it was: only its view under the room light may have moved on
+        if (ex.status === "done" && card.dataset.lit !== litKey) {
+          card.dataset.lit = litKey;
+          await this.lit(card, record.id, printer, ex.lit);
+        }
+        continue;
+      }
       card.dataset.status = ex.status;
+      card.dataset.lit = litKey;
       if (FINAL_EXPORT.has(ex.status)) {
         try {
           renderExport(card, printer, await getJSON(`/api/runs/${record.id}/exports/${encodeURIComponent(printer)}`));
@@ -244,6 +253,25 @@ export class RunView {
       }
     }
   }
+
+  /** The export card's part under the room light; a finished one's views come with the export's details. */
+  async lit(card, runId, printer, lit) {
+    const box = card.querySelector(".lit");
+    if (!box) return;
+    if (lit?.status === "done") {
+      try {
+        lit = (await getJSON(`/api/runs/${encodeURIComponent(runId)}/exports/${encodeURIComponent(printer)}`)).lit ?? lit;
+      } catch (err) {
+        lit = { ...lit, status: "failed", error: err.message };
+      }
+    }
+    renderLit(box, printer, lit);
+  }
+}
+
+/** What of an export's lit verify the card shows (its status, and its progress while it works). */
+function litState(lit) {
+  return lit ? `${lit.status}:${lit.progress?.fraction ?? ""}` : "";
 }
 
 const FINAL_EXPORT = new Set(["done", "failed"]);
@@ -306,6 +334,11 @@ export function startExport(runId, printer, formats) {
   return postJSON(`/api/runs/${encodeURIComponent(runId)}/exports`, { printer, formats: formats.length ? formats : null });
 }
 
+/** Ask for an export seen under the room light; returns the export's record (202). */
+export function startLit(runId, printer) {
+  return postJSON(`/api/runs/${encodeURIComponent(runId)}/exports/${encodeURIComponent(printer)}/lit`);
+}
+
 function el(tag, className, text) {
   const e = document.createElement(tag);
   if (className) e.className = className;
@@ -337,6 +370,9 @@ function renderExport(card, printer, ex) {
       verifyTable(v, ex.verify, { collapse: true });
       parts.push(el("h5", "", "The print, ray-traced from the viewer's eyes"), v);
     }
+    const lit = el("div", "lit");
+    renderLit(lit, printer, ex.lit);
+    parts.push(lit);
     const links = el("p", "export-links");
     const zip = ex.zip_url ?? null;
     if (zip) {
@@ -356,6 +392,69 @@ function renderExport(card, printer, ex) {
     parts.push(links);
   }
   card.replaceChildren(...parts);
+}
+
+const dB = (v) => (typeof v === "number" && Number.isFinite(v) ? v.toFixed(1) : "-");
+const times = (a, b) => (typeof a === "number" && typeof b === "number" ? `${a.toFixed(2)}–${b.toFixed(2)}×` : "-");
+
+/**
+ * An export under the room light (the export record's `lit`, saucerfab/studio/lit.py): the button that asks
+ * for it, its progress, or each view's picture under the light beside the emitted one, with the figures.
+ */
+function renderLit(box, printer, lit) {
+  const parts = [el("h5", "", "Under a room light")];
+  const status = lit?.status;
+  if (!lit || status === "failed") {
+    parts.push(el("p", "help", "Verify shows each colour as its own light in a perfect mirror. In a room the saucer is a "
+      + "semi-glossy plastic lit by a lamp, the cup a polished metal, and the relief shades itself. Rendering that takes "
+      + "about as long as the export's own verify."));
+    if (lit?.error) parts.push(el("p", "message error", lit.error));
+    const button = el("button", "", status === "failed" ? "Try again under the room light" : "See it under the room light");
+    button.type = "button";
+    button.dataset.lit = printer;
+    parts.push(button);
+  } else if (status === "queued" || status === "running") {
+    const fraction = lit.progress?.fraction ?? 0;
+    const line = el("div", "progress-line");
+    line.append(el("span", "", status === "queued" ? "Waiting for a worker…" : `Rendering under the room light… ${Math.round(100 * fraction)} %`),
+      el("span", "help", lit.progress?.message ?? ""));
+    const bar = el("div", "bar");
+    bar.setAttribute("role", "progressbar");
+    bar.setAttribute("aria-label", "verify under the room light");
+    bar.setAttribute("aria-valuenow", String(Math.round(100 * fraction)));
+    const fill = el("div");
+    fill.style.width = `${(100 * fraction).toFixed(1)}%`;
+    bar.append(fill);
+    parts.push(line, bar);
+  } else if (status === "done") {
+    const views = lit.views ?? [];
+    parts.push(el("p", "help", `Path-traced at ${lit.res ?? "?"} px from the design eye: the saucer a semi-glossy plastic `
+      + `under a dim room and a soft lamp above and in front, the cup ${lit.cup_metal ?? "metal"}. Each view is scored `
+      + "against its picture under the light's smooth part; the shading pattern is the relief's own shading on a mid-grey "
+      + "print (higher: weaker), beside a flat plate's under the same light."));
+    const table = el("table", "verify lit-table");
+    const head = el("tr");
+    for (const h of ["view", "eye", "under the light (dB)", "emitted (dB)", "shading pattern (dB)", "flat plate (dB)", "shading range"]) head.append(el("th", "", h));
+    table.append(head);
+    for (const v of views) {
+      const tr = el("tr");
+      tr.append(el("td", "", human(v.view)), el("td", "", human(v.eye)), el("td", "num", dB(v.lit_psnr_db)),
+        el("td", "num", dB(v.emitted_psnr_db)), el("td", "num", dB(v.shading_pattern_db)), el("td", "num", dB(v.flat_pattern_db)),
+        el("td", "num", `${times(v.shading_p5, v.shading_p95)} (flat ${times(v.flat_p5, v.flat_p95)})`));
+      table.append(tr);
+    }
+    parts.push(table);
+    for (const v of views) {
+      // the emitted render (3 panels) and the lit one (4 panels) share one height: columns as wide as their panels
+      const pair = el("div", "lit-pair");
+      pair.dataset.view = `${v.view}-${v.eye}`;
+      const name = `${human(v.view)} view, ${human(v.eye)} eye`;
+      if (v.emitted_picture_url) figure(pair, "emitted", v.emitted_picture_url, `${name}: emitted colour, the cup a perfect mirror (${dB(v.emitted_psnr_db)} dB)`);
+      if (v.lit_picture_url) figure(pair, "lit", v.lit_picture_url, `${name}: under the room light, the cup ${lit.cup_metal ?? "metal"} (${dB(v.lit_psnr_db)} dB; shading pattern ${dB(v.shading_pattern_db)} dB, a flat plate ${dB(v.flat_pattern_db)} dB)`);
+      parts.push(pair);
+    }
+  }
+  box.replaceChildren(...parts);
 }
 
 /** The checker's findings, per file; `check` is {file: {printable, findings}} or a list of such. */

@@ -8,7 +8,7 @@
 
 import { getJSON, postJSON, request, watchRun, FINAL } from "./api.js";
 import { DesignForm } from "./form.js";
-import { RunView, setLabels, setPrinters, startExport } from "./run.js";
+import { RunView, setLabels, setPrinters, startExport, startLit } from "./run.js";
 import { renderHistory } from "./history.js";
 
 const $ = (sel, root = document) => root.querySelector(sel);
@@ -131,7 +131,9 @@ function follow(runId) {
 /** While an export of the shown run is queued or running, re-read the run until it settles. */
 function watchExports(record) {
   clearTimeout(state.exportTimer);
-  const busy = Object.values(record.exports ?? {}).some((e) => e.status === "queued" || e.status === "running");
+  const active = (s) => s === "queued" || s === "running";
+  // an export at work, or one being rendered under the room light
+  const busy = Object.values(record.exports ?? {}).some((e) => active(e.status) || active(e.lit?.status));
   if (!busy) return;
   state.exportTimer = setTimeout(async () => {
     if (state.selected !== record.id) return;
@@ -199,6 +201,20 @@ function wireRunButtons() {
       showRecord(await getJSON(`/api/runs/${encodeURIComponent(state.selected)}`));
     } catch (err) {
       runError(err.message);
+    }
+  });
+  // an export card's "See it under the room light" (the cards are drawn anew, so one listener on their box)
+  $("#exports").addEventListener("click", async (ev) => {
+    const button = ev.target.closest("button[data-lit]");
+    if (!button) return;
+    button.disabled = true;
+    runError(null);
+    try {
+      await startLit(state.selected, button.dataset.lit);
+      showRecord(await getJSON(`/api/runs/${encodeURIComponent(state.selected)}`));
+    } catch (err) {
+      runError(err.message);
+      button.disabled = false;
     }
   });
 }
