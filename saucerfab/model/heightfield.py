@@ -130,6 +130,8 @@ def _smooth_random(u: np.ndarray, v: np.ndarray, rng: np.random.Generator) -> np
 BASE_SHAPES: dict[str, Callable[[np.ndarray, np.ndarray, np.random.Generator], np.ndarray]] = {
     "plane": _plane,
     "waves": _waves,
+    # the paper's own: six waves 10 units high across the rectangle, whatever RIDGE_DENSITY says
+    "paper_waves": _waves,
     "tabula_scalata": _tabula_scalata,
     "ripples": _ripples,
     "bowl": _bowl,
@@ -139,8 +141,13 @@ BASE_SHAPES: dict[str, Callable[[np.ndarray, np.ndarray, np.random.Generator], n
 
 #: the shapes whose ridges run across the line of sight (along x on a rectangle): around the cup on a disc
 AROUND_THE_CUP = ("waves", "tabula_scalata")
-#: on a disc those ridges are this many times as dense and 1 / this as high as on the paper's rectangle
-RING_DENSITY = 2.0
+#: those ridges are this many times as dense and 1 / this as high as the paper's (the same slopes,
+#: which part what the eye sees from what the cup sees): a viewer's eyes, beside the design eye, see
+#: the relief's parallax across the direct picture in proportion to its height. On the rectangle at
+#: 2 (benchmarks/RESULTS.md, "The whole piece and design quality per pair"): from a viewer's eyes
+#: +5.5 dB direct on heart-star and astronaut-rocket, for up to 3 dB from the design eye; on a disc
+#: (rings) +2.8 to +4.0 dB from those eyes. ``paper_waves`` is the paper's shape as it was.
+RIDGE_DENSITY = 2.0
 
 
 def shape_coordinates(n: int, saucer: Saucer | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -167,17 +174,17 @@ def base_shape(name: str, n: int, seed: int = 0, saucer: Saucer | None = None) -
             "or give a .png or .npy heightfield file"
         )
     u, v = shape_coordinates(n, saucer)
-    if key in AROUND_THE_CUP and saucer is not None and saucer.is_disc:
-        # ridges across the line of sight on a rectangle are rings around the cup on a disc: v grows
-        # towards the cup's axis (as a rectangle's v does towards the cup), so fronts face out, backs the
-        # cup; at half the spacing and half the height (the same slopes, which part what the eye sees from
-        # what the cup sees): a disc's direct picture is about half a rectangle's width, and a viewer's
-        # eyes beside the design eye see the relief's parallax across it in proportion to its height
-        # (benchmarks/RESULTS.md, "The default scene: rectangle, wide or round": +3 to +4 dB from those eyes)
-        # measured from the disc's edge, where every such shape is at its lowest: a crest the edge cut through
-        # would leave a fin of material thinner than any printer's wall between it and the part's side
-        v = RING_DENSITY * (saucer.radius - np.hypot(u - 0.5, v - 0.5))
-        return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64) / RING_DENSITY
+    if key in AROUND_THE_CUP:
+        if saucer is not None and saucer.is_disc:
+            # ridges across the line of sight on a rectangle are rings around the cup on a disc: v grows
+            # towards the cup's axis (as a rectangle's v does towards the cup), so fronts face out, backs
+            # the cup; measured from the disc's edge, where every such shape is at its lowest: a crest the
+            # edge cut through would leave a fin of material thinner than any printer's wall between it
+            # and the part's side
+            v = RIDGE_DENSITY * (saucer.radius - np.hypot(u - 0.5, v - 0.5))
+        else:  # along the rectangle's depth, from its near edge as the paper's
+            v = RIDGE_DENSITY * v
+        return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64) / RIDGE_DENSITY
     return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64)
 
 

@@ -136,17 +136,27 @@ def test_bad_disc_tables_are_refused(table: dict, match: str) -> None:  # type: 
 
 def test_ridged_shapes_run_around_the_cup_on_a_disc() -> None:
     """On a disc the waves are rings about the cup's axis, twice as dense and half as high as the paper's."""
-    from saucerfab.model.heightfield import RING_DENSITY, base_shape
+    from saucerfab.model.heightfield import RIDGE_DENSITY, base_shape
 
     saucer = disc_saucer(2.0, 201)
     h = base_shape("waves", 201, 0, saucer)
-    paper = base_shape("waves", 150)
-    assert h.max() == pytest.approx(0.1 / RING_DENSITY, rel=1e-3) and paper.max() == pytest.approx(0.1, rel=1e-3)
+    paper = base_shape("paper_waves", 150)
+    assert h.max() == pytest.approx(0.1 / RIDGE_DENSITY, rel=1e-3) and paper.max() == pytest.approx(0.1, rel=1e-3)
     # equal heights at equal distances from the axis: the grid's symmetries map rings onto themselves
     assert np.allclose(h, np.rot90(h), atol=1e-12) and np.allclose(h, h.T, atol=1e-12)
-    # along a radius, the ridges come every 1 / (6 RING_DENSITY) model units (the paper: 6 across its 1 unit)
+    # along a radius, the ridges come every 1 / (6 RIDGE_DENSITY) model units (the paper: 6 across its 1 unit)
     profile = h[100, 100:]
     crests = np.flatnonzero((profile[1:-1] > profile[:-2]) & (profile[1:-1] >= profile[2:])) + 1
-    assert np.diff(crests).mean() * 0.01 == pytest.approx(1 / (6 * RING_DENSITY), rel=0.05)
+    assert np.diff(crests).mean() * 0.01 == pytest.approx(1 / (6 * RIDGE_DENSITY), rel=0.05)
     # the rectangle's shapes are unchanged by the disc's coordinates
-    assert np.array_equal(base_shape("waves", 150, 0, load_scene("paper").saucer), paper)
+    assert np.array_equal(base_shape("waves", 150, 0, load_scene("paper").saucer), base_shape("waves", 150))
+    assert np.array_equal(base_shape("paper_waves", 150, 0, load_scene("paper").saucer), paper)
+
+
+def test_the_rectangles_waves_are_the_papers_twice_as_dense_and_half_as_high() -> None:
+    from saucerfab.model.heightfield import RIDGE_DENSITY, base_shape
+
+    u, v = np.meshgrid(np.linspace(0, 1, 150), np.linspace(0, 1, 150))
+    assert np.allclose(base_shape("paper_waves", 150), 0.05 * (1 - np.cos(2 * np.pi * 6 * v)), atol=1e-12)
+    k = RIDGE_DENSITY
+    assert np.allclose(base_shape("waves", 150), 0.05 / k * (1 - np.cos(2 * np.pi * 6 * k * v)), atol=1e-12)
