@@ -148,6 +148,12 @@ AROUND_THE_CUP = ("waves", "tabula_scalata")
 #: +5.5 dB direct on heart-star and astronaut-rocket, for up to 3 dB from the design eye; on a disc
 #: (rings) +2.8 to +4.0 dB from those eyes. ``paper_waves`` is the paper's shape as it was.
 RIDGE_DENSITY = 2.0
+#: ... on a rectangle only where its grid carries them: at least this many vertices a ridge (the
+#: default 150 x 150 grid has 12.4 a ridge at RIDGE_DENSITY 2); a coarser grid keeps the paper's six
+#: ridges (a quick 64-vertex design would have 5 vertices a ridge). A disc's grid always carries them.
+MIN_VERTICES_PER_RIDGE = 10
+#: the paper's ridges across its rectangle
+PAPER_RIDGES = 6
 
 
 def shape_coordinates(n: int, saucer: Saucer | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -163,6 +169,11 @@ def shape_coordinates(n: int, saucer: Saucer | None = None) -> tuple[np.ndarray,
     if saucer is not None and saucer.is_disc:
         return np.meshgrid(0.5 + np.linspace(*saucer.x_range, n), 0.5 + np.linspace(*saucer.y_range, n))
     return np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+
+
+def ridge_density(n: int) -> float:
+    """How many times the paper's ridges the built-in ridged shapes have on an n x n rectangle grid."""
+    return RIDGE_DENSITY if n >= MIN_VERTICES_PER_RIDGE * PAPER_RIDGES * RIDGE_DENSITY else 1.0
 
 
 def base_shape(name: str, n: int, seed: int = 0, saucer: Saucer | None = None) -> np.ndarray:
@@ -182,9 +193,11 @@ def base_shape(name: str, n: int, seed: int = 0, saucer: Saucer | None = None) -
             # edge cut through would leave a fin of material thinner than any printer's wall between it
             # and the part's side
             v = RIDGE_DENSITY * (saucer.radius - np.hypot(u - 0.5, v - 0.5))
+            density = RIDGE_DENSITY
         else:  # along the rectangle's depth, from its near edge as the paper's
-            v = RIDGE_DENSITY * v
-        return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64) / RIDGE_DENSITY
+            density = ridge_density(n)
+            v = density * v
+        return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64) / density
     return BASE_SHAPES[key](u, v, np.random.default_rng(seed)).astype(np.float64)
 
 

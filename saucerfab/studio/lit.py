@@ -30,7 +30,6 @@ the lit verify (it belonged to the files that were replaced).
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 import traceback
@@ -136,18 +135,14 @@ def _render(folder: Path, progress: Callable[[str, float], None]) -> None:
     :data:`~saucerfab.studio.results.LIT_DIR` (replaced whole, only once complete)."""
     from saucerfab.errors import InputFileError
     from saucerfab.fabricate.pipeline import export_lock
-    from saucerfab.files.fileio import atomic_dir
     from saucerfab.model.eyes import parse_eyes
-    from saucerfab.verify import DEFAULT_SPP, verify_print
+    from saucerfab.verify import DEFAULT_SPP
     from saucerfab.verify.lighting import parse_light
-    from saucerfab.workflow.quick_verify import QUICK_RES
+    from saucerfab.workflow import quick_verify
 
     if not (folder / "export.json").is_file():  # checked first: the lock and the lit folder would make the folder
         raise InputFileError(f"the export for {folder.name} has no print files any more; export it again, then ask "
                              "for it under the room light")
-    with export_lock(folder), atomic_dir(folder / LIT_DIR) as tmp:  # no export replaces the folder meanwhile
-        result = verify_print(folder, eyes=parse_eyes(LIT_EYES), res=QUICK_RES, spp=DEFAULT_SPP, pictures_dir=tmp,
-                              all_formats=False, progress=progress, light=parse_light(LIT_LIGHT))
-        doc = result.to_dict()
-        doc["folder"] = "."  # as the export's own verify names it: the print folder, wherever it is moved
-        (tmp / "verify.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    with export_lock(folder):  # no export replaces the folder meanwhile
+        quick_verify(folder, folder / LIT_DIR, progress=progress, spp=DEFAULT_SPP, light=parse_light(LIT_LIGHT),
+                     eyes=parse_eyes(LIT_EYES))

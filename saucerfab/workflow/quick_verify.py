@@ -42,14 +42,20 @@ def quick_verify(
     *,
     record_times: bool = True,
     progress: Progress | None = None,
+    spp: int = QUICK_SPP,
+    light: Any = None,
+    eyes: Any = None,
     **extra: Any,
 ) -> Any:
     """Quick-verify the print in ``print_dir``; pictures and ``verify.json`` into ``verify_dir`` (replaced whole).
 
     ``extra``: fields added to ``verify.json`` (``folder``, how the document
     names the print, defaults to ``"."``: the folder may be moved or sent on).
-    ``record_times``: keep wall times (seconds) in ``verify.json``. Returns
-    the :class:`~saucerfab.verify.VerifyResult`.
+    ``record_times``: keep wall times (seconds) in ``verify.json``. ``spp``,
+    ``light`` (a :class:`~saucerfab.verify.lighting.LightSpec`; None: emitted)
+    and ``eyes`` (an :class:`~saucerfab.model.eyes.EyeSpec`; None: verify's
+    default) as ``verify_print`` takes them (the studio's view under the room
+    light). Returns the :class:`~saucerfab.verify.VerifyResult`.
 
     Raises:
         SaucerfabError: the print cannot be verified.
@@ -57,9 +63,10 @@ def quick_verify(
     from saucerfab.files.fileio import atomic_dir
     from saucerfab.verify import verify_print
 
+    chosen = {k: v for k, v in (("light", light), ("eyes", eyes)) if v is not None}
     with atomic_dir(verify_dir) as tmp:
-        res = verify_print(print_dir, res=QUICK_RES, spp=QUICK_SPP, pictures_dir=tmp, all_formats=False,
-                           progress=progress)
+        res = verify_print(print_dir, res=QUICK_RES, spp=spp, pictures_dir=tmp, all_formats=False,
+                           progress=progress, **chosen)
         doc = res.to_dict(record_times=record_times)
         doc.update({"folder": ".", **extra})
         (tmp / "verify.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")

@@ -59,7 +59,7 @@ def test_shapes_lists_all(capsys: pytest.CaptureFixture[str]) -> None:
     code, out, _ = run_cli(["shapes"], capsys)
     assert code == 0
     names = [line.split()[0] for line in out.splitlines()]
-    assert names == sorted(["plane", "waves", "tabula_scalata", "ripples", "bowl", "smooth_random"])
+    assert names == sorted(["plane", "waves", "paper_waves", "tabula_scalata", "ripples", "bowl", "smooth_random"])
 
 
 def test_shapes_writes_npy_and_png_that_load_back(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -160,3 +160,5 @@ def test_the_rectangles_waves_are_the_papers_twice_as_dense_and_half_as_high() -
     assert np.allclose(base_shape("paper_waves", 150), 0.05 * (1 - np.cos(2 * np.pi * 6 * v)), atol=1e-12)
     k = RIDGE_DENSITY
     assert np.allclose(base_shape("waves", 150), 0.05 / k * (1 - np.cos(2 * np.pi * 6 * k * v)), atol=1e-12)
+    # a grid too coarse to carry them keeps the paper's
+    assert np.array_equal(base_shape("waves", 64), base_shape("paper_waves", 64))
