@@ -139,7 +139,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--background",
         metavar="COLOUR",
-        help="#rrggbb of the padding and of what transparent areas show (default: each picture's border colour)",
+        help="#rrggbb of the padding, of what transparent areas show and of the ground outside the frames "
+        "(default: each picture's border colour; pictures whose border colours differ share the direct "
+        "picture's as the ground outside the frames)",
     )
     p.add_argument(
         "--enhancement",

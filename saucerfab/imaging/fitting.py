@@ -31,7 +31,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from saucerfab.errors import ConfigError, ImageError
-from saucerfab.imaging.images import LoadedImage, ViewImage, intended_background
+from saucerfab.imaging.images import LoadedImage, ViewImage, colour_hex, intended_background
 
 
 def _resize_plane(plane: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -90,7 +90,7 @@ def crop_to_content(img: LoadedImage, background: Sequence[float] | str | None =
     bg = intended_background(img.rgb, background, img.alpha)
     box = content_box(img.rgb, img.alpha, bg)
     if box is None:
-        hexa = "#" + "".join(f"{int(round(float(c) * 255)):02x}" for c in np.clip(bg, 0, 1))
+        hexa = colour_hex(bg)
         raise ImageError(
             f"image {img.path!r} has no content to crop to: every pixel lies within {CONTENT_DISTANCE} of its "
             f"background colour {hexa}; give --fit pad, or a picture with something on it"

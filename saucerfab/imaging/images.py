@@ -58,6 +58,9 @@ _DECODED_FORMATS = ("PNG", "JPEG", "MPO", "WEBP")
 #: white, sRGB in [0, 1]: the background of a subject on a transparent canvas
 #: (and of the solid-colour enhanced targets, saucerfab.optimize.enhancement)
 WHITE = (1.0, 1.0, 1.0)
+#: colours closer than this (Euclidean over the three sRGB channels in [0, 1]) read as one:
+#: verify's stray distance (:mod:`saucerfab.verify.wholeview`) and :func:`piece_ground`'s rule
+SAME_COLOUR_DISTANCE = 0.25
 
 #: width of the border ring the background colour is estimated from, as a
 #: fraction of the image's short side
@@ -230,14 +233,49 @@ def intended_background(
     return None if picture is None else estimate_background(picture, alpha)
 
 
-def recorded_background(parameters: Any) -> str | None:
-    """The ``--background`` a design.json's ``parameters`` record, or None.
+def colour_hex(colour: Sequence[float] | np.ndarray) -> str:
+    """``#rrggbb`` of a (3,) sRGB colour in [0, 1] (clipped)."""
+    return "#" + "".join(f"{round(float(c) * 255):02x}" for c in np.clip(np.asarray(colour, np.float64), 0, 1))
 
-    None too for a value that is not a colour (design checked it when it was
-    given, so only a damaged file has one): the picture's own border colour
+
+def piece_ground(pictures: dict[str, np.ndarray], background: str | None = None) -> str | None:
+    """The one colour every view's surround aims at, ``#rrggbb``; None: each picture keeps its own.
+
+    The design's ``--background`` when given. Else, when two pictures' border
+    colours lie farther apart than :data:`SAME_COLOUR_DISTANCE`, the direct
+    picture's border colour (the first of ``pictures``): the plate the cup
+    stands on is seen beside the cup and, in the mirror, under the reflected
+    picture, so with two grounds one of the two surrounds shows the other's
+    colour there (two photographs: 11-27 % of a surround); with one, neither.
+    Pictures whose grounds already read as one colour keep their own, so no
+    frame's edge shows against a slightly different ground.
+
+    Args:
+        pictures: view name -> (H, W, 3) float picture in [0, 1], the direct one first
+            (alpha already flattened onto its background).
+        background: the design's ``--background`` or None.
+    """
+    if background is not None:
+        return background
+    grounds = [estimate_background(np.asarray(p, np.float64)) for p in pictures.values()]
+    apart = max((float(np.linalg.norm(a - b)) for i, a in enumerate(grounds) for b in grounds[i + 1:]), default=0.0)
+    return colour_hex(grounds[0]) if apart > SAME_COLOUR_DISTANCE else None
+
+
+def recorded_background(parameters: Any) -> str | None:
+    """The colour a design.json's ``parameters`` record for what lies outside the frames, or None.
+
+    Its ``background`` (the design's ``--background``), else its ``ground``
+    (the one ground :func:`piece_ground` chose for pictures whose border
+    colours differ). None too for a value that is not a colour (design checked
+    it, so only a damaged file has one): each picture's own border colour
     stands for it then, in the export's walls and in verify's whole view alike.
     """
-    value = parameters.get("background") if isinstance(parameters, dict) else None
+    if not isinstance(parameters, dict):
+        return None
+    value = parameters.get("background")
+    if value is None:
+        value = parameters.get("ground")
     if value is None:
         return None
     try:

@@ -279,7 +279,7 @@ class _StageLoop:
         self.project = CrestProjection(prep.target, scene, prep.base) if prep.target is not None else None
         self._targets: dict[tuple[str, float], dict[str, Any]] = {}
         #: the whole view around the frames (saucerfab.optimize.surround); None with surround_weight 0
-        self.surround = Surround(rig, prep, request.background) if request.surround() > 0 else None
+        self.surround = Surround(rig, prep, prep.ground) if request.surround() > 0 else None
         #: per view, the pixels of its picture's rectangle (None: the whole square), what E_visual scores
         self.masks = rig.picture_masks()
         self.stage_t0 = time.perf_counter()
@@ -545,7 +545,7 @@ class _StageLoop:
             face_uvs=tex.face_uvs,
             face_view=tex.face_view,
             parameters=_parameters(request, self.weights, self.rho, self.stages, prep.enhancement, prep.target,
-                                   self.eyes),
+                                   self.eyes, prep.ground),
             metrics=metrics,
             inputs=prep.inputs,
             # the inputs as meant, at the texture's detail: what verify compares prints with
@@ -589,8 +589,13 @@ def _parameters(
     enhancement: dict[str, str] | None,
     target: PrintTarget | None = None,
     eyes: list[EyeRig] | None = None,
+    ground: str | None = None,
 ) -> dict[str, Any]:
     d = asdict(request)
+    if request.background is None and ground is not None:
+        # the one ground chosen for pictures whose border colours differ: export's walls and plate and
+        # verify's whole view read it (saucerfab.imaging.images.recorded_background)
+        d["ground"] = ground
     if eyes:
         # the eyes the design was made for: mm from the design eye along the direct view's right and up
         d["ipd_mm"] = request.eye_spec().ipd_mm if request.eye_spec().mode == "both" else None

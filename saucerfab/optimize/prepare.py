@@ -48,6 +48,9 @@ class Prepared:
             (``subject``, ``none`` or ``ablation``) and why (:func:`choose_enhancement`).
         target: the printer and scale the design is made for.
         print_notes: what :func:`saucerfab.optimize.printable.preflight` had to say.
+        ground: ``#rrggbb`` every view's surround aims at outside the frames (the
+            ``--background``, or the one ground :func:`saucerfab.imaging.images.piece_ground`
+            chose for pictures whose border colours differ); None: each picture's own.
     """
 
     scene: Scene
@@ -62,6 +65,7 @@ class Prepared:
     enhancement: dict[str, str] | None = None
     target: PrintTarget | None = None
     print_notes: tuple[str, ...] = ()
+    ground: str | None = None
 
 
 def build_scene(request: DesignRequest) -> Scene:
@@ -223,6 +227,12 @@ def prepare(request: DesignRequest) -> Prepared:
         inputs["shape"] = {"file": Path(request.shape).name, "sha256": sha256_file(request.shape)}
     else:
         inputs["shape"] = {"builtin": request.shape}
+    ground = im.piece_ground(texture, request.background)
+    if request.background is None and ground is not None:
+        print_notes.append(
+            f"the pictures' border colours differ: outside the frames every view aims at the direct picture's, "
+            f"{ground}, so the plate under the cup reads as one ground beside the cup and in it "
+            "(--background chooses another)")
     enhancement = choose_enhancement(request, problems, {k: inputs[k]["mask_source"] for k in names})
     if enhancement["strategy"] == "none":
         enhanced = {k: v.copy() for k, v in render.items()}  # no enhanced targets: the pictures themselves
@@ -233,7 +243,7 @@ def prepare(request: DesignRequest) -> Prepared:
         enhanced = dict(zip(names, e))
     return Prepared(
         scene, base, render, texture, enhanced, masks, inputs, groups, placement or None, enhancement,
-        target, tuple(print_notes),
+        target, tuple(print_notes), ground,
     )
 
 

@@ -127,8 +127,11 @@ class DesignRequest(_Weights):
             whole picture) or "crop" (cut to its content: the box of what differs from
             its background, :func:`saucerfab.imaging.fitting.crop_to_content`); one rule for all,
             or per picture as "direct=crop,reflected=pad".
-        background: "#rrggbb" of the padding and of what transparent areas
-            show; None: each picture's border colour (median of its outer ring).
+        background: "#rrggbb" of the padding, of what transparent areas
+            show and of the ground outside the frames; None: each picture's border
+            colour (median of its outer ring), and outside the frames one ground,
+            the direct picture's, where those differ
+            (:func:`saucerfab.imaging.images.piece_ground`).
         color_init: "gray" (0.5 everywhere, the paper's choice) or "projected"
             (each face coloured from the enhanced targets by the texturing
             step, the paper's Figure 12 (c), which it reports as comparable;

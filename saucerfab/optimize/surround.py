@@ -26,8 +26,9 @@ inside it.
 
 The background of a view is what :func:`saucerfab.imaging.images.intended_background`
 says of the picture the stage aims at: the design's ``--background``, else
-the picture's border colour (for the black-white enhanced targets, their own
-background). With it in the energy the conflict reduction also hides each
+the one ground :func:`saucerfab.imaging.images.piece_ground` chose where the
+pictures' border colours differ, else the picture's border colour (for the
+black-white enhanced targets, their own background). With it in the energy the conflict reduction also hides each
 picture from the other view's surround: the slopes that show the direct
 picture turn away from the cup where the cup would show them outside the
 reflected frame, as they do inside it.
@@ -250,7 +251,8 @@ class Surround:
     Args:
         rig: the design eye's views.
         prep: the prepared run (its base heights, pictures and enhanced targets).
-        background: the design's ``--background`` (None: each picture's border colour).
+        background: the design's ground (``Prepared.ground``: its ``--background`` or the one ground
+            chosen for it; None: each picture's border colour).
     """
 
     def __init__(self, rig: Any, prep: Any, background: str | None) -> None:

@@ -29,7 +29,9 @@ sub-samples of:
   background.
 
 The background colour is the design's ``--background`` when ``export.json``
-records one, else the picture's own border colour
+records one, else the one ground the design chose for pictures whose border
+colours differ (``ground``: :func:`saucerfab.imaging.images.piece_ground`),
+else the picture's own border colour
 (:func:`saucerfab.imaging.images.estimate_background`: the median of its outer ring).
 Pixels that see no part (the table, the cup's rim, the mirror showing
 anything else) or see it partly, or partly directly and partly in the mirror,
@@ -47,8 +49,10 @@ can hold a sliver of the table that the coverage samples miss).
   whose colour lies farther than :data:`STRAY_DISTANCE` from that surround's
   background. The issue's target is :data:`TARGET_MAX_STRAY`; a view fails
   above :data:`DEFAULT_MAX_STRAY` (lenient: the plate the cup stands on
-  shows both beside the cup and in it, and where the pictures' backgrounds
-  differ one surround keeps it, about 30 % of the saucer around a photograph);
+  shows both beside the cup and in it, and where a design folder has two
+  grounds one surround keeps it, 10-30 % of it; a design whose pictures'
+  border colours differ now takes one,
+  :func:`saucerfab.imaging.images.piece_ground`);
 * ``width_share``: the reflected picture's width over the cup's visible width,
   both along the image row where the reflected frame's region is widest
   (the cup's silhouette there, from its wall projected into the image).
@@ -63,6 +67,7 @@ from typing import Any
 import numpy as np
 
 from saucerfab.fabricate.scene_file import CupSpec, PrintScene, ViewSpec
+from saucerfab.imaging.images import SAME_COLOUR_DISTANCE
 from saucerfab.verify.printfolder import PrintedSurface
 from saucerfab.verify.raytrace import (
     FULL_COVERAGE,
@@ -77,9 +82,10 @@ from saucerfab.verify.raytrace import (
 
 #: colour distance (Euclidean over the three sRGB channels in [0, 1]) beyond which a
 #: surround pixel is stray: far from the background the design meant there
-STRAY_DISTANCE = 0.25
-#: default highest stray share of a surround for a whole view to pass (lenient: designs of two
-#: photographs keep about 30 % on the saucer, the plate under the cup; the aim is :data:`TARGET_MAX_STRAY`)
+STRAY_DISTANCE = SAME_COLOUR_DISTANCE
+#: default highest stray share of a surround for a whole view to pass (lenient: a design folder made
+#: with two grounds keeps 10-30 % of one surround on the plate under the cup, seen beside the cup and
+#: in it; the one ground a design now takes (piece_ground) keeps it under :data:`TARGET_MAX_STRAY`)
 DEFAULT_MAX_STRAY = 0.5
 #: the stray share issue 43 asks of every design, each surround
 TARGET_MAX_STRAY = 0.05
