@@ -16,7 +16,9 @@ from saucerfab.workflow import run_design
 pytest.importorskip("mitsuba")
 pytest.importorskip("torch")
 
-SMALL = dict(resolution=48, image_size=96, max_iters=30, record_times=False)
+# the paper's rectangle: at this small size its frames-only design shows the heart up the cup (on the
+# default wide saucer it happens not to: 0.3 % of the mirror's surround)
+SMALL = dict(resolution=48, image_size=96, max_iters=30, record_times=False, scene="paper")
 
 
 def whole_view(tmp: Path, name: str, **options: object):  # noqa: ANN201

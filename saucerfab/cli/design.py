@@ -17,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options; every design option defaults to None ("not given") and its default is DesignRequest's."""
     from saucerfab.model.cups import CUP_SPEC_USAGE
     from saucerfab.model.eyes import DEFAULT_IPD_MM
-    from saucerfab.model.scene import PRESETS, paper_scene, round_scene
+    from saucerfab.model.scene import PRESETS, default_scene, round_scene
     from saucerfab.optimize.energies import WEIGHTS
     from saucerfab.optimize.request import (
         ABLATIONS,
@@ -32,7 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from saucerfab.optimize.stages import STAGE_CAPS
 
     default = DesignRequest.default
-    paper = paper_scene()  # the default scene's sizes
+    default_sizes = default_scene()  # the default scene's sizes
     round_ = round_scene()  # the round saucer's
     p.add_argument("--direct", required=True, help="image seen directly on the saucer")
     p.add_argument("--reflected", required=True, help="image seen in the mirror cup")
@@ -53,7 +53,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--cup-diameter-mm",
         type=float,
         help="the real cup's width across its footprint in mm: the design's physical scale (default: the "
-        f"scene's, {paper.cup_diameter_mm:g})",
+        f"scene's, {default_sizes.cup_diameter_mm:g})",
     )
     p.add_argument(
         "--saucer-diameter-mm",
@@ -66,9 +66,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--out", required=True, help="design folder to write (an existing design needs --force)")
     p.add_argument("--force", action="store_true", help="replace the design already in --out")
     p.add_argument("--resolution", type=int,
-                   help=f"heightfield vertices per side (default: the scene's, {paper.saucer.resolution})")
+                   help=f"heightfield vertices per side (default: the scene's, {default_sizes.saucer.resolution})")
     p.add_argument("--image-size", type=int,
-                   help=f"rendered image size in pixels (default: the scene's, {paper.direct.image_size})")
+                   help=f"rendered image size in pixels (default: the scene's, {default_sizes.direct.image_size})")
     p.add_argument(
         "--seed",
         type=int,

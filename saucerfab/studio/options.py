@@ -84,13 +84,13 @@ def option_choices() -> dict[str, Any]:
     from saucerfab.model.cups import CUP_CLASSES
     from saucerfab.model.heightfield import BASE_SHAPES
     from saucerfab.model.profiles import list_profiles
-    from saucerfab.model.scene import paper_scene
+    from saucerfab.model.scene import default_scene
     from saucerfab.optimize.request import ENHANCEMENTS, FRAMES, METHODS, DesignRequest
     from saucerfab.optimize.stages import STAGE_CAPS
 
     if set(FIT_RULES) != set(FITS):  # a new fit rule needs its sentence here
         raise RuntimeError(f"FIT_RULES covers {sorted(FIT_RULES)} but the fit rules are {FITS}")
-    paper = paper_scene()
+    scene = default_scene()
     default = DesignRequest.default
     return {
         "shapes": sorted(BASE_SHAPES),
@@ -106,9 +106,9 @@ def option_choices() -> dict[str, Any]:
         "defaults": {
             "printer": default("printer"),
             "scene": default("scene"),
-            "cup_diameter_mm": paper.cup_diameter_mm,
-            "resolution": paper.saucer.resolution,
-            "image_size": paper.direct.image_size,
+            "cup_diameter_mm": scene.cup_diameter_mm,
+            "resolution": scene.saucer.resolution,
+            "image_size": scene.direct.image_size,
             "max_iters": default("max_iters"),
             "shape": default("shape"),
             "fit": default("fit"),

@@ -76,7 +76,7 @@ export_options = { obj_zip = true }
     assert b.formats == ("obj", "glb")
     assert b.design_options == {"resolution": 16, "image_size": 24, "seed": 3}
     assert b.export_options == {"texture_px": 256, "obj_zip": True}
-    assert b.shape == "waves" and b.scene == "paper"
+    assert b.shape == "waves" and b.scene == "wide"
     assert set(b.files) == {"direct", "reflected"}
 
 

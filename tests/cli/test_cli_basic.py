@@ -12,7 +12,7 @@ import saucerfab
 from saucerfab.cli import SUBCOMMANDS, main
 from saucerfab.model.cups import PrismCup
 from saucerfab.model.heightfield import base_shape, load_shape
-from saucerfab.model.scene import Scene, load_scene, paper_scene, scene_to_toml
+from saucerfab.model.scene import Scene, default_scene, load_scene, scene_to_toml
 
 
 def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
@@ -102,7 +102,7 @@ def test_usage_errors_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_scene_prints_and_writes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code, out, _ = run_cli(["scene"], capsys)
-    assert code == 0 and out == scene_to_toml(paper_scene())
+    assert code == 0 and out == scene_to_toml(default_scene())
     src = tmp_path / "in.toml"
     src.write_text('[cup]\nshape = "prism"\nsides = 6\n')
     dst = tmp_path / "out" / "scene.toml"

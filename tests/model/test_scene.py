@@ -269,12 +269,12 @@ def test_a_deeply_nested_scene_file_is_a_config_error(tmp_path: Path) -> None:
 
 
 def test_the_named_scenes_and_the_default() -> None:
-    """`paper` is the paper's section 4 setup and the default; `wide` the same eye and cup over a 175 mm saucer."""
+    """`paper` is the paper's section 4 setup; `wide`, the default, the same eye and cup over a 185 mm saucer."""
     from saucerfab.model.scene import DEFAULT_PRESET, PRESETS, WIDE_X_RANGE
     from saucerfab.optimize.request import DesignRequest
 
-    assert DEFAULT_PRESET == "paper" == DesignRequest.default("scene") and set(PRESETS) == {"paper", "wide", "round"}
+    assert DEFAULT_PRESET == "wide" == DesignRequest.default("scene") and set(PRESETS) == {"paper", "wide", "round"}
     wide, paper = load_scene("wide"), load_scene("paper")
-    assert wide.saucer.x_range == WIDE_X_RANGE and wide.saucer.size[0] * wide.mm_per_unit == pytest.approx(175.0)
+    assert wide.saucer.x_range == WIDE_X_RANGE and wide.saucer.size[0] * wide.mm_per_unit == pytest.approx(185.0)
     assert (wide.camera, wide.cup, wide.saucer.y_range) == (paper.camera, paper.cup, paper.saucer.y_range)
     assert scene_from_dict({"preset": "wide", "saucer": {"resolution": 60}}).saucer.x_range == WIDE_X_RANGE

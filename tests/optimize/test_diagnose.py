@@ -62,7 +62,8 @@ def test_the_egg_crate_is_suspect_before_the_design_and_the_default_shape_is_not
 
     default = str(DesignRequest.default("shape"))
     ok, ok_err = _check(default, capsys)
-    assert not ok.suspect and ok.base < BASE_CONFLICT_LIMIT - 0.05  # measured 11.5 % at this size
+    # measured 16 % at this size on the default wide scene (11.5 % on the paper's)
+    assert not ok.suspect and ok.base < BASE_CONFLICT_LIMIT - 0.03
     assert ok_err == "" and ok.builtins == {}  # nothing said, nothing more measured
 
 

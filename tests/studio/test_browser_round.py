@@ -65,7 +65,7 @@ def test_the_form_offers_the_round_saucer_and_its_diameter(base: str, chromium: 
         choices = page.evaluate("() => [...document.querySelectorAll('#scene option')].map(o => [o.value, o.text])")
         assert [k for k, _ in choices] == list(PRESETS), choices
         assert dict(choices)["round"] == SCENE_LABELS["round"] == "Round saucer, cup at the centre"
-        assert page.input_value("#scene") == "paper" and page.locator("#saucer-diameter").is_hidden()
+        assert page.input_value("#scene") == "wide" and page.locator("#saucer-diameter").is_hidden()
 
         # ---- round: the diameter shows, its placeholder the scene's for the cup given ----
         page.select_option("#scene", "round")

@@ -29,7 +29,7 @@ def idle(tmp_path: Path) -> TestClient:
 def test_the_options_offer_every_scene_with_the_round_one_labelled(idle: TestClient) -> None:
     doc = idle.get("/api/options").json()
     scenes = {s["key"]: s for s in doc["scenes"]}
-    assert list(scenes) == list(PRESETS) and doc["defaults"]["scene"] == "paper"
+    assert list(scenes) == list(PRESETS) and doc["defaults"]["scene"] == "wide"
     assert scenes["round"]["label"] == SCENE_LABELS["round"] == "Round saucer, cup at the centre"
     assert scenes["round"]["round"] and not scenes["paper"]["round"] and not scenes["wide"]["round"]
     # what an empty diameter gets, per mm of cup: the page shows it for the cup's diameter given
