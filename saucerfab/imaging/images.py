@@ -58,9 +58,12 @@ _DECODED_FORMATS = ("PNG", "JPEG", "MPO", "WEBP")
 #: white, sRGB in [0, 1]: the background of a subject on a transparent canvas
 #: (and of the solid-colour enhanced targets, saucerfab.optimize.enhancement)
 WHITE = (1.0, 1.0, 1.0)
-#: colours closer than this (Euclidean over the three sRGB channels in [0, 1]) read as one:
-#: verify's stray distance (:mod:`saucerfab.verify.wholeview`) and :func:`piece_ground`'s rule
-SAME_COLOUR_DISTANCE = 0.25
+#: pictures whose border colours lie farther apart than this (Euclidean over the three sRGB channels in
+#: [0, 1]) share one ground outside the frames (:func:`piece_ground`). Below verify's stray distance (0.25)
+#: on purpose: tree-note's grey and white grounds, 0.17 apart, left white streaks of the cup's ground
+#: across the saucer's grey (the slopes and plate the cup shows) that a person sees; heart-star's cream
+#: and white, 0.07 apart, do not show.
+ONE_GROUND_DISTANCE = 0.1
 
 #: width of the border ring the background colour is estimated from, as a
 #: fraction of the image's short side
@@ -242,7 +245,7 @@ def piece_ground(pictures: dict[str, np.ndarray], background: str | None = None)
     """The one colour every view's surround aims at, ``#rrggbb``; None: each picture keeps its own.
 
     The design's ``--background`` when given. Else, when two pictures' border
-    colours lie farther apart than :data:`SAME_COLOUR_DISTANCE`, the direct
+    colours lie farther apart than :data:`ONE_GROUND_DISTANCE`, the direct
     picture's border colour (the first of ``pictures``): the plate the cup
     stands on is seen beside the cup and, in the mirror, under the reflected
     picture, so with two grounds one of the two surrounds shows the other's
@@ -259,7 +262,7 @@ def piece_ground(pictures: dict[str, np.ndarray], background: str | None = None)
         return background
     grounds = [estimate_background(np.asarray(p, np.float64)) for p in pictures.values()]
     apart = max((float(np.linalg.norm(a - b)) for i, a in enumerate(grounds) for b in grounds[i + 1:]), default=0.0)
-    return colour_hex(grounds[0]) if apart > SAME_COLOUR_DISTANCE else None
+    return colour_hex(grounds[0]) if apart > ONE_GROUND_DISTANCE else None
 
 
 def recorded_background(parameters: Any) -> str | None:

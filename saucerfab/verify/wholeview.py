@@ -67,7 +67,6 @@ from typing import Any
 import numpy as np
 
 from saucerfab.fabricate.scene_file import CupSpec, PrintScene, ViewSpec
-from saucerfab.imaging.images import SAME_COLOUR_DISTANCE
 from saucerfab.verify.printfolder import PrintedSurface
 from saucerfab.verify.raytrace import (
     FULL_COVERAGE,
@@ -82,7 +81,7 @@ from saucerfab.verify.raytrace import (
 
 #: colour distance (Euclidean over the three sRGB channels in [0, 1]) beyond which a
 #: surround pixel is stray: far from the background the design meant there
-STRAY_DISTANCE = SAME_COLOUR_DISTANCE
+STRAY_DISTANCE = 0.25
 #: default highest stray share of a surround for a whole view to pass (lenient: a design folder made
 #: with two grounds keeps 10-30 % of one surround on the plate under the cup, seen beside the cup and
 #: in it; the one ground a design now takes (piece_ground) keeps it under :data:`TARGET_MAX_STRAY`)

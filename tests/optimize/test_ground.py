@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from saucerfab.imaging.images import (
-    SAME_COLOUR_DISTANCE,
+    ONE_GROUND_DISTANCE,
     colour_hex,
     piece_ground,
     recorded_background,
@@ -29,7 +29,7 @@ def _framed(border: tuple[float, float, float], inside: tuple[float, float, floa
 
 
 def test_grounds_that_read_as_one_keep_their_own() -> None:
-    grey = 1.0 - SAME_COLOUR_DISTANCE / np.sqrt(3) + 0.01  # just within the distance of white
+    grey = 1.0 - ONE_GROUND_DISTANCE / np.sqrt(3) + 0.01  # just within the distance of white
     assert piece_ground({"direct": _framed((1, 1, 1)), "reflected": _framed((grey,) * 3)}) is None
 
 
