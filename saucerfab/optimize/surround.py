@@ -11,7 +11,9 @@ view, :mod:`saucerfab.verify.wholeview`); this module lets the optimizer see it.
 For each frame view (``direct``, ``reflected``, ``reflected2``) a **whole
 view** (:class:`WholeView`) renders the same mesh through a camera from the
 same eye that takes in all of it (the view's bounding square, a little
-margin), at about half the frame's pixel density (:data:`WHOLE_PIXEL_SCALE`).
+margin), at about half the frame's pixel density (:data:`WHOLE_PIXEL_SCALE`) and at most
+:data:`MAX_WHOLE_SIZE` pixels a side (at the default 512 px frames, a whole-view pixel spans
+about three frame pixels).
 Its **target** is the ideal whole view, blur-matched as the frames' targets
 are (:mod:`saucerfab.optimize.targets`): the base shape coloured with the
 picture where a face's centre lies inside the frame and with the view's
