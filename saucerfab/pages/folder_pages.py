@@ -355,7 +355,9 @@ def _lit_part(folder: Path, ver: Mapping[str, Any]) -> tuple[str, list[tuple[str
     for v in ver.get("lit_views") or []:
         if not isinstance(v, Mapping):
             continue
-        label = (f"{v.get('view')} view, {v.get('eye')} eye: {_db(v.get('lit_psnr_db'))} dB under the light, "
+        flat_print = v.get("flat_print_lit_psnr_db")
+        beside = f" (a flat print of it {_db(flat_print)} dB)" if isinstance(flat_print, (int, float)) else ""
+        label = (f"{v.get('view')} view, {v.get('eye')} eye: {_db(v.get('lit_psnr_db'))} dB under the light{beside}, "
                  f"shading pattern {_db(v.get('shading_pattern_db'))} dB (a flat plate "
                  f"{_db(v.get('flat_pattern_db'))} dB)")
         lines.append(label)

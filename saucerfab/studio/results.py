@@ -30,7 +30,7 @@ VIEWER_NAME = "viewer.html"
 #: an export's verify under the room light, when asked for (:mod:`saucerfab.studio.lit`), beside its own ``verify/``
 LIT_DIR = "verify_room"
 #: the figures of a lit view (verify.json's ``lit_views``) the API passes on
-LIT_FIELDS = ("view", "eye", "lit_psnr_db", "shading_pattern_db", "flat_pattern_db", "shading_p5", "shading_p95",
+LIT_FIELDS = ("view", "eye", "lit_psnr_db", "flat_print_lit_psnr_db", "shading_pattern_db", "flat_pattern_db", "shading_p5", "shading_p95",
               "flat_p5", "flat_p95", "white_level", "gain_rgb")
 #: the largest JSON file read for the results, bytes
 _MAX_JSON = 8 << 20

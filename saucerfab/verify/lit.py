@@ -11,9 +11,14 @@ materials and lights of :mod:`.lighting`:
   black lid;
 * the room's constant environment and the lamp (:func:`emitters`).
 
-Two scenes per print (:class:`LitTracer`): ``lit`` with the texture, and
+Up to three scenes per print (:class:`LitTracer`): ``lit`` with the texture,
 ``white`` with every albedo 1: the shading alone, what the light and the
-relief do to a white print.
+relief do to a white print, and ``black`` with every albedo 0: the plastic's
+coat alone. The plastic is linear in its albedo (Mitsuba's ``roughplastic``
+without its ``nonlinear`` option), so on a flat plate, where light passes
+from one point of the part to another only through the cup (a second-order
+share), ``black + a (white - black)`` is the plate printed with albedo ``a``
+(:func:`~.litscore.flat_print`).
 
 The integrator is Mitsuba's path tracer with :data:`MAX_DEPTH` 5. Depth
 counts the segments of a light path: 2 is a lit point seen directly
@@ -143,7 +148,7 @@ class LitTracer:
         self.extent_mm = float(np.ptp(surface.vertices, axis=0).max())
 
     def _scene(self, kind: str) -> Any:
-        """The ``lit`` or ``white`` Mitsuba scene, built on first use (a white plate needs no textured one)."""
+        """The ``lit``, ``white`` or ``black`` Mitsuba scene, built on first use (a plate needs no textured one)."""
         if kind in self._scenes:
             return self._scenes[kind]
         mi, surface = self._mi, self._surface
@@ -152,12 +157,12 @@ class LitTracer:
         # Mitsuba's bitmap has v = 0 at the image's top row; the files' v runs bottom -> top
         uv = surface.corner_uv.reshape(-1, 2) * (1.0, -1.0) + (0.0, 1.0)
         entries: dict[str, Any] = {"type": "scene", "integrator": LIT_INTEGRATOR, **self._lights}
-        white = {"type": "rgb", "value": [1.0, 1.0, 1.0]}
+        plain = {"white": {"type": "rgb", "value": [1.0, 1.0, 1.0]}, "black": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
         for tex_id in np.unique(surface.face_texture):
             sel = np.flatnonzero(surface.face_texture == tex_id)
             idx = (sel[:, None] * 3 + np.arange(3)).reshape(-1)
-            if kind == "white":
-                albedo: dict[str, Any] = white
+            if kind in plain:
+                albedo: dict[str, Any] = plain[kind]
             elif tex_id >= 0:
                 lin = _SRGB8_TO_LINEAR[surface.textures[int(tex_id)]]  # a table look-up: 4096^2 texels in 0.1 s
                 albedo = {"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(lin)), "raw": True,
@@ -173,7 +178,7 @@ class LitTracer:
 
     def render(self, kind: str, eye: tuple[float, float, float], view: ViewSpec, size: int, spp: int, *,
                seed: int = 0) -> LitImage:
-        """The ``lit`` or ``white`` scene from ``eye`` (mm) in ``view``'s frame, ``size`` px, ``spp`` samples a pixel.
+        """The ``lit``, ``white`` or ``black`` scene from ``eye`` (mm) in ``view``'s frame, ``size`` px, ``spp`` samples a pixel.
 
         The camera is the emitted verify's (:func:`~.raytrace._sensor`); the two halves are rendered
         with seeds ``2 seed`` and ``2 seed + 1``, as :meth:`~.raytrace.PrintTracer.render`'s colour pass.

@@ -35,6 +35,19 @@ plate** over the saucer's footprint at the printed top's mean height
 pixels of the picture's rectangle where the plate is seen fully: the pattern no
 print can avoid (the light's own falloff finer than ``G``, the cup's shadow and
 glints; under the room light, none above the noise at 16 samples a pixel).
+
+The **flat print** is that plate printed with the view's reference (each pixel's
+plate point given the reference's colour there: the direct picture lying flat,
+the reflected one as its anamorphic image), under the same light, scored as the
+print is (:func:`flat_print`): the lit score a print without relief reaches
+(``flat_print_lit_psnr_db``), the yardstick for the print's. What a flat print
+misses of a perfect score: the plastic's coat, which adds the room's reflection
+to every colour (one gain per channel cannot take up an added light: dark
+colours lose most), the light's falloff finer than ``G``, the cup's shadow. It
+is not a bound: a relief's slopes tilt the coat's reflection away from the
+bright room (slopes facing the cup mirror the cup), so a print can score above
+its flat print (measured: chelsea-coffee's reflected view, compensated, 30.4 dB
+against the flat print's 23.6; ``benchmarks/results/light_session27.txt``).
 """
 
 from __future__ import annotations
@@ -178,6 +191,15 @@ def compare_lit(lit: LitImage, white: LitImage, reference: np.ndarray, seen: np.
     return LitComparison(db, gain, level, ref_lit, shading_pattern(white, smooth, region))
 
 
+def flat_print(black: LitImage, white: LitImage, reference: np.ndarray) -> LitImage:
+    """The flat plate printed with ``reference`` (S, S, 3) sRGB in [0, 1], from its ``black`` and ``white``
+    renders (the same view and samples count): ``black + a (white - black)`` per pixel, ``a`` the
+    reference made linear (the plastic is linear in its albedo: :mod:`.lit`); its halves combine likewise."""
+    a = srgb_to_linear(np.asarray(reference, np.float32))
+    return LitImage((black.rgb + a * (white.rgb - black.rgb)).astype(np.float32),
+                    (black.half_diff + a * (white.half_diff - black.half_diff)).astype(np.float32))
+
+
 class LitViews:
     """Renders and scores every view of one print under a light: the lit print, the white print and the
     flat plate (:mod:`.lit`), from any eye.
@@ -216,16 +238,19 @@ class LitViews:
         white = self.tracer.render("white", eye, view, res, spp, seed=self.seed)
         cmp = compare_lit(lit, white, reference, seen, region, self.sigma_px)
         plate_white = self.plate.render("white", eye, view, res, spp, seed=self.seed)
+        plate_black = self.plate.render("black", eye, view, res, spp, seed=self.seed)
         cover = render_part(self.plate_cover, eye, view, res, spp)
         plate_seen = (cover.direct if view_name == "direct" else cover.reflected) >= FULL_COVERAGE
         plate_smooth = smooth_part(plate_white.rgb, plate_seen, self.sigma_px)
         flat = shading_pattern(plate_white, plate_smooth, plate_seen & in_picture)
+        printed_flat = flat_print(plate_black, plate_white, reference)
+        flat_cmp = compare_lit(printed_flat, plate_white, reference, plate_seen, region & plate_seen, self.sigma_px)
         score = LitViewScore(view_name, eye_name, cmp.psnr_db, tuple(float(g) for g in cmp.gain), cmp.white_level,
                              cmp.pattern.db, cmp.pattern.p5, cmp.pattern.p95, flat.db, flat.p5, flat.p95,
-                             int(np.sum(region)))
+                             int(np.sum(region)), flat_print_lit_psnr_db=flat_cmp.psnr_db)
         if pictures is not None:
             score.picture = write_lit_picture(pictures, f"{eye_name}_{view_name}_lit", score, lit.rgb[box],
-                                              cmp.reference_lit[box], white.rgb[box], plate_white.rgb[box])
+                                              cmp.reference_lit[box], white.rgb[box], printed_flat.rgb[box])
         self.seconds += time.perf_counter() - t0
         return score
 
@@ -236,9 +261,10 @@ class LitViews:
 
 
 def write_lit_picture(folder: Path, stem: str, score: LitViewScore, lit: np.ndarray, reference_lit: np.ndarray,
-                      white: np.ndarray, plate_white: np.ndarray) -> str:
-    """Write the lit view, the reference under the smooth light, the shading alone and the flat plate's
-    shading side by side as ``folder/stem.png`` (atomically); returns the file's name. Arrays are linear."""
+                      white: np.ndarray, flat_lit: np.ndarray) -> str:
+    """Write the lit view, the reference under the smooth light, the shading alone and the flat print
+    under the same light side by side as ``folder/stem.png`` (atomically); returns the file's name.
+    Arrays are linear."""
     from saucerfab.files.fileio import write_bytes_atomic
     from saucerfab.imaging.panels import side_by_side, to_png_bytes
 
@@ -247,7 +273,7 @@ def write_lit_picture(folder: Path, stem: str, score: LitViewScore, lit: np.ndar
             (f"lit: {score.view}, {score.eye} eye, {score.lit_psnr_db:.1f} dB", display(lit)),
             ("meant, under the light's smooth part", display(reference_lit)),
             (f"shading alone: pattern {score.shading_pattern_db:.1f} dB", display(white)),
-            (f"flat plate: {score.flat_pattern_db:.1f} dB", display(plate_white)),
+            (f"a flat print, lit: {score.flat_print_lit_psnr_db:.1f} dB", display(flat_lit)),
         ],
         height=max(256, lit.shape[0]),
     )

@@ -140,6 +140,8 @@ class LitViewScore:
         shading_p5, shading_p95: 5th and 95th percentiles of white / smooth.
         flat_pattern_db, flat_p5, flat_p95: the same for a flat plate under the same light.
         pixels: pixels compared.
+        flat_print_lit_psnr_db: the lit PSNR of a flat print of the same picture under the same light,
+            scored the same way (:func:`~.litscore.flat_print`): what a print without relief reaches, dB.
         picture: the lit picture's file name, if written.
     """
 
@@ -155,6 +157,7 @@ class LitViewScore:
     flat_p5: float
     flat_p95: float
     pixels: int
+    flat_print_lit_psnr_db: float = float("nan")
     picture: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
@@ -162,6 +165,7 @@ class LitViewScore:
             "view": self.view,
             "eye": self.eye,
             "lit_psnr_db": _num(self.lit_psnr_db, 2),
+            "flat_print_lit_psnr_db": _num(self.flat_print_lit_psnr_db, 2),
             "gain_rgb": [_num(g, 4) for g in self.gain_rgb],
             "white_level": _num(self.white_level, 4),
             "shading_pattern_db": _num(self.shading_pattern_db, 2),

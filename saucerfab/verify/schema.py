@@ -71,6 +71,9 @@ LIT_VIEW_SCORE: dict[str, Any] = {
         "eye": {"type": "string"},
         "lit_psnr_db": {**_NUM_OR_NULL, "description": "PSNR of the lit render against the reference lit by the light's "
                                                        "smooth part (one best gain per channel), same pixels as psnr_db"},
+        "flat_print_lit_psnr_db": {**_NUM_OR_NULL, "description": "the same score of a flat plate printed with the "
+                                                                  "view's reference under the same light: what a print "
+                                                                  "without relief reaches (absent from older documents)"},
         "gain_rgb": {**_RGB, "description": "that gain per channel: the plastic against the texture (about 0.8-1)"},
         "white_level": {**_NUM_OR_NULL, "description": "mean of the white render over the compared pixels: how bright "
                                                        "a white print looks in this view (the cup's metal darkens "
@@ -84,7 +87,7 @@ LIT_VIEW_SCORE: dict[str, Any] = {
         "flat_p95": _NUM_OR_NULL,
         "pixels": {"type": "integer", "minimum": 0},
         "picture": {"type": ["string", "null"], "description": "lit view, reference under the smooth light, "
-                                                                "shading alone, flat plate's shading"},
+                                                                "shading alone, the flat print lit"},
     },
 }
 

@@ -26,13 +26,15 @@ def test_the_lit_views_and_the_bleed_are_in_the_verify_section(tmp_path: Path) -
     lit = {"view": "direct", "eye": "design", "lit_psnr_db": 26.4, "shading_pattern_db": 23.1,
            "flat_pattern_db": 99.0, "picture": "design_direct_lit.png"}
     folder = _folder(tmp_path, {"bleed_mm": 0.12, "light": {"kind": "room", "cup_metal": {"name": "chromium"}},
-                                "lit_views": [lit, {**lit, "view": "reflected", "picture": "../escape.png"}]})
+                                "lit_views": [lit, {**lit, "view": "reflected", "picture": "../escape.png",
+                                                                "flat_print_lit_psnr_db": 30.04}]})
     section = verify_section(folder)
     assert section is not None
     assert "a colour bleed of 0.12 mm" in section.text
     assert "Under the room light" in section.text and "the cup chromium" in section.text
     assert "direct view, design eye: 26.4 dB under the light, shading pattern 23.1 dB (a flat plate 99.0 dB)" in (
-        section.text)
+        section.text)  # a document written before the flat print's score: none said
+    assert "reflected view, design eye: 26.4 dB under the light (a flat print of it 30.0 dB)" in section.text
     captions = [c for c, _ in section.images]
     assert sum("under the room light" in c for c in captions) == 1  # a picture outside verify/ is never read
 

@@ -64,7 +64,8 @@ def test_an_export_under_the_room_light_shows_each_lit_view_beside_the_emitted_o
         views = {(v["view"], v["eye"]): v for v in lit["views"]}
         assert set(views) == {("direct", "design"), ("reflected", "design")}
         for v in views.values():
-            for k in ("lit_psnr_db", "shading_pattern_db", "flat_pattern_db", "emitted_psnr_db", "white_level"):
+            for k in ("lit_psnr_db", "flat_print_lit_psnr_db", "shading_pattern_db", "flat_pattern_db", "emitted_psnr_db",
+                      "white_level"):
                 assert isinstance(v[k], (int, float)) and math.isfinite(v[k]), (k, v)
             assert 0 < v["shading_p5"] <= v["shading_p95"] and 0 < v["flat_p5"] <= v["flat_p95"]
             for key, name in (("lit_picture_url", f"design_{v['view']}_lit.png"),

@@ -31,6 +31,7 @@ from saucerfab.verify.lighting import (
 )
 from saucerfab.verify.lit import LitImage, LitTracer, emitters, flat_plate
 from saucerfab.verify.litscore import compare_lit, shading_pattern, smooth_part
+from saucerfab.verify.litscore import flat_print as print_flat  # (the module's fixture is named flat_print)
 from saucerfab.verify.printfolder import find_mesh_files, load_print_scene, read_surface
 from saucerfab.verify.raytrace import PrintTracer, mitsuba
 
@@ -84,6 +85,21 @@ def test_the_plastic_is_within_its_documented_distance_of_the_lambertian_value(f
         rho = float(srgb_to_linear(np.array(srgb8 / 255.0)))
         expect = (PLASTIC_ROOM_DIFFUSE * rho + PLASTIC_ROOM_COAT) * 0.5
         assert np.all(np.abs(img.rgb[seen].mean(axis=0) - expect) < 0.01 * 0.5), (srgb8, img.rgb[seen].mean(0), expect)
+
+
+def test_the_flat_print_of_a_grey_from_the_black_and_white_plates_is_the_plate_painted_that_grey(flat_print):
+    # the plastic is linear in its albedo (roughplastic without ``nonlinear``), lamp and room both
+    room = parse_light("room")
+    plate, far, view, seen = _uniform_plate(flat_print, 128)
+    painted = LitTracer(plate, far, room, CUP_METALS["mirror"]).render("lit", far.camera, view, RES, 16)
+    bare = LitTracer(replace(plate, face_texture=np.full(plate.faces.shape[0], -1, np.int64), textures=[]), far, room,
+                     CUP_METALS["mirror"])
+    black, white = (bare.render(k, far.camera, view, RES, 16) for k in ("black", "white"))
+    grey = np.full((RES, RES, 3), 128 / 255.0, np.float32)
+    made = print_flat(black, white, grey)
+    assert np.all(black.rgb[seen].mean(axis=0) < 0.5 * white.rgb[seen].mean(axis=0))  # the coat alone is dim
+    got, want = made.rgb[seen].mean(axis=0), painted.rgb[seen].mean(axis=0)
+    assert np.all(np.abs(got / want - 1.0) < 0.01), (got, want)
 
 
 def test_a_lamp_of_power_p_makes_a_white_paper_at_the_cup_foot_read_p():
@@ -190,13 +206,16 @@ def test_cli_room_light_writes_the_lit_scores_pictures_and_lines(flat_print, tmp
         assert (tmp_path / "a" / v["picture"]).is_file()
     # the heart is painted for the direct view (the reflected one is the heart against the star: low in any light)
     assert views[("design", "direct")]["lit_psnr_db"] > 20
+    # a print with no relief scores under the light what a flat print of its picture does (the noise apart)
+    direct = views[("design", "direct")]
+    assert abs(direct["lit_psnr_db"] - direct["flat_print_lit_psnr_db"]) < 1.5, direct
     # the cup's chromium darkens the reflected view against the direct one; the gain is the plastic's
     assert views[("design", "reflected")]["white_level"] < 0.7 * views[("design", "direct")]["white_level"]
     assert all(0.7 < g < 1.1 for g in views[("design", "direct")]["gain_rgb"])
     assert main([*args, "-o", str(tmp_path / "b")]) == 0
     out = capsys.readouterr().out
     assert "under the room light (the cup chromium" in out
-    assert "direct     design" in out and "dB lit  pattern" in out and "flat plate" in out
+    assert "direct     design" in out and "dB lit (" in out and "flat plate" in out and "a flat print of it" in out
 
 
 def test_lit_eyes_all_scores_every_eye_and_design_only_the_design_eye(flat_print, tmp_path, capsys):

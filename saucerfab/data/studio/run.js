@@ -430,16 +430,17 @@ function renderLit(box, printer, lit) {
     const views = lit.views ?? [];
     parts.push(el("p", "help", `Path-traced at ${lit.res ?? "?"} px from the design eye: the saucer a semi-glossy plastic `
       + `under a dim room and a soft lamp above and in front, the cup ${lit.cup_metal ?? "metal"}. Each view is scored `
-      + "against its picture under the light's smooth part; the shading pattern is the relief's own shading on a mid-grey "
+      + "against its picture under the light's smooth part, beside a flat print of it under the same light (the same plastic "
+      + "without the relief: its gloss, the light itself); the shading pattern is the relief's own shading on a mid-grey "
       + "print (higher: weaker), beside a flat plate's under the same light."));
     const table = el("table", "verify lit-table");
     const head = el("tr");
-    for (const h of ["view", "eye", "under the light (dB)", "emitted (dB)", "shading pattern (dB)", "flat plate (dB)", "shading range"]) head.append(el("th", "", h));
+    for (const h of ["view", "eye", "under the light (dB)", "a flat print (dB)", "emitted (dB)", "shading pattern (dB)", "flat plate (dB)", "shading range"]) head.append(el("th", "", h));
     table.append(head);
     for (const v of views) {
       const tr = el("tr");
       tr.append(el("td", "", human(v.view)), el("td", "", human(v.eye)), el("td", "num", dB(v.lit_psnr_db)),
-        el("td", "num", dB(v.emitted_psnr_db)), el("td", "num", dB(v.shading_pattern_db)), el("td", "num", dB(v.flat_pattern_db)),
+        el("td", "num", dB(v.flat_print_lit_psnr_db)), el("td", "num", dB(v.emitted_psnr_db)), el("td", "num", dB(v.shading_pattern_db)), el("td", "num", dB(v.flat_pattern_db)),
         el("td", "num", `${times(v.shading_p5, v.shading_p95)} (flat ${times(v.flat_p5, v.flat_p95)})`));
       table.append(tr);
     }
