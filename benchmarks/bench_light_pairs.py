@@ -11,7 +11,8 @@ design exported again with ``--shading-compensation room``
 emitted light (the default) and under ``--light room`` (the default cup metal,
 seed 0). Per view it prints the emitted PSNR, the lit PSNR, the lit PSNR of a
 flat print of the same picture under the same light (the same plastic without
-the relief: :func:`saucerfab.verify.litscore.flat_print`) and the relief's shading pattern,
+the relief: :func:`saucerfab.verify.litscore.flat_print`), the print against
+that flat print (both lit, no gain) and the relief's shading pattern,
 plain -> compensated, and the plain export's verify times (the lit one against
 the emitted one, design eye). ``bench_light.py`` measures the lit score's noise
 (two seeds) and every eye lit on one pair; this table is the per-pair picture.
@@ -74,14 +75,16 @@ def main() -> int:
             e0, e1 = before[0].score(lit0.view, lit0.eye), after[0].score(lit0.view, lit0.eye)
             rows.append(f"| {pair} | {lit0.view} | {e0.psnr_db:.1f} -> {e1.psnr_db:.1f} | {lit0.lit_psnr_db:.1f} -> "
                         f"{lit1.lit_psnr_db:.1f} | {lit0.flat_print_lit_psnr_db:.1f} | "
+                        f"{lit0.against_flat_print_psnr_db:.1f} -> {lit1.against_flat_print_psnr_db:.1f} | "
                         f"{lit0.shading_pattern_db:.1f} -> {lit1.shading_pattern_db:.1f} |")
     print()
     print("saucerfab design --direct D --reflected R --out X && saucerfab export X --out P --no-verify "
           "[--shading-compensation room]; verify P --eyes design --res 256 --spp 16 --primary-only [--light room]")
     print()
     print("| pair | view | emitted dB: plain -> compensated | room light dB: plain -> compensated "
-          "| a flat print under the room light dB | shading pattern dB: plain -> compensated |")
-    print("|---|---|---|---|---|---|")
+          "| a flat print under the room light dB | the print against its flat print, lit, dB: plain -> compensated "
+          "| shading pattern dB: plain -> compensated |")
+    print("|---|---|---|---|---|---|---|")
     print("\n".join(rows))
     print(f"end load {_load()}")
     return 0

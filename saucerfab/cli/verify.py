@@ -130,14 +130,16 @@ def print_lit_scores(result, out=None) -> None:  # type: ignore[no-untyped-def]
     lamp = result.light.get("lamp")
     where = "" if lamp is None else f", lamp {lamp['size_mm']:g} mm at {','.join(f'{c:g}' for c in lamp['xyz_mm'])} mm"
     print(f"  under the {result.light['kind']} light (the cup {result.light['cup_metal']['name']}{where}; "
-          f"{result.lit_seconds:.0f} s): against the picture under the light's smooth part (a flat print of it); "
+          f"{result.lit_seconds:.0f} s): against the picture under the light's smooth part (a flat print of it; "
+          "the print against that flat print); "
           "shading pattern of the relief (flat plate)", file=out)
 
     def db(x: float) -> str:
         return "  -- " if x != x else f"{x:5.1f}"
 
     for v in result.lit_views:
-        print(f"    {v.view:10s} {v.eye:8s} {db(v.lit_psnr_db)} dB lit ({db(v.flat_print_lit_psnr_db).strip()} dB)  pattern {db(v.shading_pattern_db)} dB "
+        print(f"    {v.view:10s} {v.eye:8s} {db(v.lit_psnr_db)} dB lit ({db(v.flat_print_lit_psnr_db).strip()} dB; "
+              f"against it {db(v.against_flat_print_psnr_db).strip()} dB)  pattern {db(v.shading_pattern_db)} dB "
               f"(flat plate {db(v.flat_pattern_db)} dB), shading {v.shading_p5:.2f}-{v.shading_p95:.2f}x "
               f"(flat {v.flat_p5:.2f}-{v.flat_p95:.2f}x), a white print reads {v.white_level:.2f}", file=out)
 

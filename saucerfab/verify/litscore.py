@@ -47,7 +47,10 @@ colours lose most), the light's falloff finer than ``G``, the cup's shadow. It
 is not a bound: a relief's slopes tilt the coat's reflection away from the
 bright room (slopes facing the cup mirror the cup), so a print can score above
 its flat print (measured: chelsea-coffee's reflected view, compensated, 30.4 dB
-against the flat print's 23.6; ``benchmarks/results/light_session27.txt``).
+against the flat print's 23.6; ``benchmarks/results/light_session27.txt``). The
+print is also compared with its flat print directly, both lit and shown as a
+screen shows them, without a gain (``against_flat_print_psnr_db``): how far the
+relief makes the print look from a flat print of the same pictures in that light.
 """
 
 from __future__ import annotations
@@ -245,9 +248,14 @@ class LitViews:
         flat = shading_pattern(plate_white, plate_smooth, plate_seen & in_picture)
         printed_flat = flat_print(plate_black, plate_white, reference)
         flat_cmp = compare_lit(printed_flat, plate_white, reference, plate_seen, region & plate_seen, self.sigma_px)
+        # the print against its flat print, both under this light and shown as a screen shows them: the relief's
+        # own cost, no gain (both are the same plastic); the two renders' noise taken out
+        (seen_lit, noise_lit), (seen_flat, noise_flat) = shown(lit), shown(printed_flat)
+        against_flat = psnr(seen_lit, seen_flat, region & plate_seen, noise_lit + noise_flat)
         score = LitViewScore(view_name, eye_name, cmp.psnr_db, tuple(float(g) for g in cmp.gain), cmp.white_level,
                              cmp.pattern.db, cmp.pattern.p5, cmp.pattern.p95, flat.db, flat.p5, flat.p95,
-                             int(np.sum(region)), flat_print_lit_psnr_db=flat_cmp.psnr_db)
+                             int(np.sum(region)), flat_print_lit_psnr_db=flat_cmp.psnr_db,
+                             against_flat_print_psnr_db=against_flat)
         if pictures is not None:
             score.picture = write_lit_picture(pictures, f"{eye_name}_{view_name}_lit", score, lit.rgb[box],
                                               cmp.reference_lit[box], white.rgb[box], printed_flat.rgb[box])

@@ -142,6 +142,8 @@ class LitViewScore:
         pixels: pixels compared.
         flat_print_lit_psnr_db: the lit PSNR of a flat print of the same picture under the same light,
             scored the same way (:func:`~.litscore.flat_print`): what a print without relief reaches, dB.
+        against_flat_print_psnr_db: PSNR of the lit render against that flat print's, both under the
+            light, no gain: how far the relief makes the print look from a flat print, dB.
         picture: the lit picture's file name, if written.
     """
 
@@ -158,6 +160,7 @@ class LitViewScore:
     flat_p95: float
     pixels: int
     flat_print_lit_psnr_db: float = float("nan")
+    against_flat_print_psnr_db: float = float("nan")
     picture: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
@@ -166,6 +169,7 @@ class LitViewScore:
             "eye": self.eye,
             "lit_psnr_db": _num(self.lit_psnr_db, 2),
             "flat_print_lit_psnr_db": _num(self.flat_print_lit_psnr_db, 2),
+            "against_flat_print_psnr_db": _num(self.against_flat_print_psnr_db, 2),
             "gain_rgb": [_num(g, 4) for g in self.gain_rgb],
             "white_level": _num(self.white_level, 4),
             "shading_pattern_db": _num(self.shading_pattern_db, 2),

@@ -74,6 +74,10 @@ LIT_VIEW_SCORE: dict[str, Any] = {
         "flat_print_lit_psnr_db": {**_NUM_OR_NULL, "description": "the same score of a flat plate printed with the "
                                                                   "view's reference under the same light: what a print "
                                                                   "without relief reaches (absent from older documents)"},
+        "against_flat_print_psnr_db": {**_NUM_OR_NULL, "description": "PSNR of the lit render against the flat "
+                                                                      "print's, both under the light, no gain: how far "
+                                                                      "the relief makes the print look from a flat one "
+                                                                      "(absent from older documents)"},
         "gain_rgb": {**_RGB, "description": "that gain per channel: the plastic against the texture (about 0.8-1)"},
         "white_level": {**_NUM_OR_NULL, "description": "mean of the white render over the compared pixels: how bright "
                                                        "a white print looks in this view (the cup's metal darkens "

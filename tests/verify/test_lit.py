@@ -209,13 +209,15 @@ def test_cli_room_light_writes_the_lit_scores_pictures_and_lines(flat_print, tmp
     # a print with no relief scores under the light what a flat print of its picture does (the noise apart)
     direct = views[("design", "direct")]
     assert abs(direct["lit_psnr_db"] - direct["flat_print_lit_psnr_db"]) < 1.5, direct
+    # and looks like it under the light (the plate lies at the print's height: only the edges differ)
+    assert direct["against_flat_print_psnr_db"] > 30, direct
     # the cup's chromium darkens the reflected view against the direct one; the gain is the plastic's
     assert views[("design", "reflected")]["white_level"] < 0.7 * views[("design", "direct")]["white_level"]
     assert all(0.7 < g < 1.1 for g in views[("design", "direct")]["gain_rgb"])
     assert main([*args, "-o", str(tmp_path / "b")]) == 0
     out = capsys.readouterr().out
     assert "under the room light (the cup chromium" in out
-    assert "direct     design" in out and "dB lit (" in out and "flat plate" in out and "a flat print of it" in out
+    assert "direct     design" in out and "dB lit (" in out and "against it" in out and "flat plate" in out and "a flat print of it" in out
 
 
 def test_lit_eyes_all_scores_every_eye_and_design_only_the_design_eye(flat_print, tmp_path, capsys):
